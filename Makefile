@@ -1,0 +1,35 @@
+# Lamina: every target bootstraps the pinned virtual environment from requirements.txt first.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+EXT_TOOL = $(wildcard $(VENV)/lib/python3.11/site-packages/bpy/*/scripts/addons_core/bl_pkg/cli/blender_ext.py)
+OUT ?= out
+
+.PHONY: venv test test-all demo bench extension clean
+
+venv: $(VENV)/.stamp
+
+$(VENV)/.stamp: requirements.txt
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -r requirements.txt
+	touch $@
+
+test: venv
+	$(PY) -m pytest -m "not slow" -q
+
+test-all: venv
+	$(PY) -m pytest -q
+
+demo: venv
+	$(PY) -m addon.cli demo --out $(OUT)
+
+bench: venv
+	$(PY) -m addon.cli bench --out docs
+
+extension: venv
+	mkdir -p dist
+	$(PY) $(EXT_TOOL) build --source-dir . --output-dir dist
+
+clean:
+	rm -rf dist build $(OUT) .pytest_cache

@@ -1,0 +1,22 @@
+"""Lamina add-on package.
+
+Importing ``addon`` (and its bpy-free core: ``models``, ``reference``, ``presets``, most of ``bake``) never
+imports bpy, so scripts, tests and training code can use the reference without Blender. The Blender layer
+is imported by ``register()`` only.
+"""
+
+
+def _blender_modules():
+    from . import operators, ui
+
+    return (operators, ui)
+
+
+def register():
+    for module in _blender_modules():
+        module.register()
+
+
+def unregister():
+    for module in reversed(_blender_modules()):
+        module.unregister()

@@ -1,0 +1,156 @@
+"""SpongeCake (Wang et al. 2022): stacks of volumetric layers of SGGX microflakes or Henyey–Greenstein media.
+
+Declared once here; the reference, the node group, the OSL shader, the UI, presets and the CLI read it.
+Parameter names follow the paper's Table 2: albedo γ, roughness α (the mean cosine g for ``hg``),
+Schlick reflectance f0, optical thickness Tρ (the model only depends on the product, Sec. 4.1),
+and orientation ω_p (flake normal for ``surface``, fiber tangent for ``fiber``; tangent space).
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+from .params import Param, ParamError, Validated, read_fields
+
+ID = "spongecake"
+LABEL = "SpongeCake"
+MAX_LAYERS = 4
+LAYER_TYPES = ("surface", "fiber", "hg")
+SUBSTRATE_TYPES = ("none", "diffuse", "conductor", "dielectric")
+
+# Flake roughness below this makes the SGGX matrix singular in float32; HG |g| above this is a delta.
+MIN_FLAKE_ROUGHNESS = 1e-4
+MAX_ABS_G = 0.999
+
+LAYER = (
+    Param("type", "Type", "enum", "surface", items=LAYER_TYPES,
+          description="surface: flake normals around the orientation; fiber: fibers along it; hg: Henyey-Greenstein medium"),
+    Param("roughness", "Roughness", "float", 0.3, -MAX_ABS_G, 1.0, texturable=True,
+          description="SGGX roughness alpha of the flakes or fibers; for hg layers the mean cosine g"),
+    Param("albedo", "Albedo", "color", (0.8, 0.8, 0.8), 0.0, 1.0, texturable=True,
+          description="Single-scattering albedo gamma of each scattering event"),
+    Param("thickness", "Thickness", "float", 1.0, 0.0, 1e4, unit="optical depth", texturable=True,
+          description="Optical thickness T*rho (density times thickness, unitless)"),
+    Param("f0", "F0", "color", (1.0, 1.0, 1.0), 0.0, 1.0,
+          description="Schlick reflectance of the flakes at normal incidence; (1,1,1) means no Fresnel"),
+    Param("orientation", "Orientation", "vector", (0.0, 0.0, 1.0), texturable=True, subtype="DIRECTION",
+          description="Flake normal (surface) or fiber tangent (fiber) in tangent space (x tangent, z normal)"),
+)
+
+SUBSTRATE = {
+    "none": (),
+    "diffuse": (
+        Param("albedo", "Albedo", "color", (0.5, 0.5, 0.5), 0.0, 1.0, texturable=True,
+              description="Lambertian substrate reflectance"),
+    ),
+    "conductor": (
+        Param("roughness", "Roughness", "float", 0.2, 1e-4, 1.0, description="GGX alpha of the metal substrate"),
+        Param("eta", "IOR", "color", (0.2, 0.92, 1.1), 0.01, 10.0, description="Real part of the complex IOR"),
+        Param("k", "Extinction", "color", (3.9, 2.45, 2.14), 0.0, 20.0, description="Imaginary part of the complex IOR"),
+    ),
+    "dielectric": (
+        Param("roughness", "Roughness", "float", 0.1, 1e-4, 1.0, description="GGX alpha of the dielectric substrate"),
+        Param("ior", "IOR", "float", 1.5, 1.0001, 3.0, description="Relative index of refraction of the substrate"),
+    ),
+}
+
+STACK = (
+    Param("delta_transmission", "Delta transmission", "bool", False,
+          description="Let unscattered light pass straight through the stack (Sec. 4.4)"),
+)
+
+
+@dataclass(frozen=True)
+class Layer:
+    type: str
+    roughness: float
+    albedo: tuple
+    thickness: float
+    f0: tuple
+    orientation: tuple
+
+    @property
+    def is_flake(self) -> bool:
+        return self.type != "hg"
+
+    @property
+    def has_fresnel(self) -> bool:
+        return self.is_flake and tuple(self.f0) != (1.0, 1.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Substrate:
+    type: str
+    albedo: tuple = (0.5, 0.5, 0.5)
+    roughness: float = 0.2
+    eta: tuple = (1.5, 1.5, 1.5)
+    k: tuple = (0.0, 0.0, 0.0)
+    ior: float = 1.5
+
+
+@dataclass(frozen=True)
+class Params:
+    layers: tuple
+    substrate: Substrate | None = None
+    delta_transmission: bool = False
+
+    def to_dict(self) -> dict:
+        return {
+            "layers": [asdict(layer) for layer in self.layers],
+            "substrate": None if self.substrate is None else _substrate_dict(self.substrate),
+            "delta_transmission": self.delta_transmission,
+        }
+
+
+def _substrate_dict(s: Substrate) -> dict:
+    return {"type": s.type, **{p.name: getattr(s, p.name) for p in SUBSTRATE[s.type]}}
+
+
+def validate(data: dict) -> Validated:
+    """Clean a SpongeCake dict: clamp out-of-range numbers (with messages), refuse what cannot be clamped."""
+    if not isinstance(data, dict):
+        raise ParamError(f"spongecake: expected a dict, got {type(data).__name__}")
+    unknown = sorted(set(data) - {"layers", "substrate", "delta_transmission", "name", "description"})
+    if unknown:
+        raise ParamError(f"spongecake: unknown key(s) {', '.join(unknown)}")
+    layers_in = data.get("layers") or []
+    if not 1 <= len(layers_in) <= MAX_LAYERS:
+        raise ParamError(f"spongecake: needs 1 to {MAX_LAYERS} layers, got {len(layers_in)}")
+    warnings: list[str] = []
+    layers = tuple(_read_layer(d, i, warnings) for i, d in enumerate(layers_in))
+    substrate = _read_substrate(data.get("substrate"), warnings)
+    stack = read_fields(STACK, {k: data[k] for k in ("delta_transmission",) if k in data}, "spongecake: ", warnings)
+    return Validated(Params(layers, substrate, stack["delta_transmission"]), warnings)
+
+
+def params_from_dict(data: dict) -> Params:
+    """The Python API entry point: a SpongeCake dict (see docs/api.md) to reference parameters."""
+    return validate(data).params
+
+
+def _read_layer(d: dict, index: int, warnings: list[str]) -> Layer:
+    where = f"layer {index + 1}: "
+    if not isinstance(d, dict):
+        raise ParamError(f"{where}expected a dict, got {d!r}")
+    fields = read_fields(LAYER, d, where, warnings)
+    lo, hi = (MIN_FLAKE_ROUGHNESS, 1.0) if fields["type"] != "hg" else (-MAX_ABS_G, MAX_ABS_G)
+    r = fields["roughness"]
+    if not lo <= r <= hi:
+        fields["roughness"] = min(max(r, lo), hi)
+        warnings.append(f"{where}roughness: {r:g} is outside [{lo:g}, {hi:g}] for {fields['type']} layers, "
+                        f"clamped to {fields['roughness']:g}")
+    return Layer(**fields)
+
+
+def _read_substrate(d, warnings: list[str]) -> Substrate | None:
+    if d is None:
+        return None
+    if not isinstance(d, dict) or d.get("type") not in SUBSTRATE_TYPES:
+        raise ParamError(f"substrate: expected a dict with type in {', '.join(SUBSTRATE_TYPES)}, got {d!r}")
+    if d["type"] == "none":
+        return None
+    rest = {k: v for k, v in d.items() if k != "type"}
+    return Substrate(d["type"], **read_fields(SUBSTRATE[d["type"]], rest, "substrate: ", warnings))
+
+
+def default_params() -> Params:
+    return params_from_dict({"layers": [{}]})
