@@ -1,0 +1,283 @@
+"""Write a shading formula once, run it on three backends.
+
+A model's Cycles mapping (``nodes/<model>.py``) is a function ``shade(b, inputs)`` that builds the
+closure mix with the backend ``b``: float/colour arithmetic through Python operators and ``b.exp`` &c.,
+closures through ``b.glossy`` &c. The same function then
+
+* emits OSL source (``OslBackend``, here),
+* builds Cycles math nodes (``nodes.node_backend.NodeBackend``, bpy), and
+* evaluates in numpy what Cycles will render (``NumpyBackend``, here) so the mapping's error against the
+  reference can be measured without Blender.
+
+Values are scalars or RGB colours. Directions are tangent-space vectors (x tangent, y bitangent, z normal);
+the backend turns them into world space. The view direction is ``wo``; nothing may depend on ``wi``:
+closure weights in Cycles can only depend on the view (research notes §6).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+# Smallest cosine a weight formula divides by: keeps grazing pixels finite (they get weight → 0 anyway).
+MIN_COS = 1e-6
+
+
+# --------------------------------------------------------------------------------------------- numpy
+
+
+class NumpyBackend:
+    """Evaluate a mapping in float64 for N view directions ``wo`` (local frame, z = normal)."""
+
+    def __init__(self, wo: np.ndarray, inputs: dict, form: str = "osl"):
+        self.form = form  # "osl" or "nodes": which Cycles form to predict
+        self.wo = np.asarray(wo, dtype=np.float64)
+        self.n = len(self.wo)
+        self._inputs = inputs
+        self.closures: list[tuple] = []
+
+    # -- inputs and geometry
+    def input(self, name: str, kind: str):
+        v = np.asarray(self._inputs[name], dtype=np.float64)
+        if kind == "float":
+            return np.broadcast_to(v, (self.n,)).copy()
+        return np.broadcast_to(v, (self.n, 3)).copy()
+
+    def const(self, v):
+        return v
+
+    def cos_view(self):
+        return np.maximum(self.wo[:, 2], MIN_COS)
+
+    def direction(self, v):
+        """Tangent-space direction → unit vector in the frame the closures use (here the local frame)."""
+        v = np.broadcast_to(v, (self.n, 3))
+        return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
+
+    def dot_view(self, d):
+        return np.einsum("ij,ij->i", d, self.wo)
+
+    # -- math
+    exp = staticmethod(np.exp)
+    sqrt = staticmethod(lambda x: np.sqrt(np.maximum(x, 0.0)))
+    log = staticmethod(lambda x: np.log(np.maximum(x, 1e-300)))
+    minimum = staticmethod(np.minimum)
+    maximum = staticmethod(np.maximum)
+
+    def scale(self, color, s):
+        return color * np.asarray(s)[..., None]
+
+    # -- closures (recorded, evaluated by ``evaluate``)
+    def _add(self, kind, color, **kw):
+        self.closures.append((kind, color, kw))
+
+    def glossy(self, color, alpha, normal):
+        self._add("ggx", color, alpha=alpha, normal=normal)
+
+    def schlick_glossy(self, color, alpha, normal, f0):
+        if self.form == "nodes":
+            self.glossy(schlick_at_view(self, color, f0, normal), alpha, normal)
+        else:
+            self._add("ggx", color, alpha=alpha, normal=normal, f0=f0)
+
+    def diffuse(self, color):
+        self._add("diffuse", color)
+
+    def translucent(self, color):
+        self._add("translucent", color)
+
+    def transparent(self, color):
+        self._add("transparent", color)
+
+    def conductor(self, color, alpha, eta, k):
+        self._add("conductor", color, alpha=alpha, eta=eta, k=k)
+
+    def dielectric(self, color, alpha, ior):
+        self._add("dielectric", color, alpha=alpha, ior=ior)
+
+    def evaluate(self, wi: np.ndarray) -> np.ndarray:
+        """The BSDF value (no cosine) that the recorded closures give for light from ``wi``."""
+        from . import closures_np
+
+        wi = np.asarray(wi, dtype=np.float64)
+        f = np.zeros((self.n, 3))
+        for kind, color, kw in self.closures:
+            f += color * closures_np.EVAL[kind](wi, self.wo, **kw)
+        return f
+
+
+# ----------------------------------------------------------------------------------------------- OSL
+
+
+class OslValue:
+    """An OSL expression string with its type ("float" or "color")."""
+
+    def __init__(self, code: str, kind: str):
+        self.code = code
+        self.kind = kind
+
+    def _bin(self, other, op, swap=False):
+        o = _osl(other)
+        kind = "color" if "color" in (self.kind, o.kind) else "float"
+        a, b = (o, self) if swap else (self, o)
+        return OslValue(f"({a.code} {op} {b.code})", kind)
+
+    def __add__(self, o):
+        return self._bin(o, "+")
+
+    def __radd__(self, o):
+        return self._bin(o, "+", True)
+
+    def __sub__(self, o):
+        return self._bin(o, "-")
+
+    def __rsub__(self, o):
+        return self._bin(o, "-", True)
+
+    def __mul__(self, o):
+        return self._bin(o, "*")
+
+    def __rmul__(self, o):
+        return self._bin(o, "*", True)
+
+    def __truediv__(self, o):
+        return self._bin(o, "/")
+
+    def __rtruediv__(self, o):
+        return self._bin(o, "/", True)
+
+    def __neg__(self):
+        return OslValue(f"(-{self.code})", self.kind)
+
+
+def _osl(v) -> OslValue:
+    if isinstance(v, OslValue):
+        return v
+    if isinstance(v, (tuple, list)):
+        return OslValue("color({})".format(", ".join(_num(x) for x in v)), "color")
+    return OslValue(_num(v), "float")
+
+
+def _num(x: float) -> str:
+    return repr(float(x))
+
+
+class OslBackend:
+    """Emit the body of an OSL surface shader: temporaries as local variables, closures summed into BSDF."""
+
+    def __init__(self, params: list[tuple[str, str, object]]):
+        self.params = params  # (osl name, kind, default)
+        self.lines: list[str] = []
+        self.closures: list[str] = []
+        self._count = 0
+
+    def input(self, name: str, kind: str):
+        return OslValue(osl_identifier(name), "color" if kind in ("color", "vector") else kind)
+
+    def const(self, v):
+        return _osl(v)
+
+    def _let(self, value: OslValue, kind=None) -> OslValue:
+        self._count += 1
+        name = f"t{self._count}"
+        kind = kind or value.kind
+        self.lines.append(f"{kind} {name} = {value.code};")
+        return OslValue(name, kind)
+
+    def cos_view(self):
+        return self._let(OslValue(f"max(dot(N, -I), {MIN_COS!r})", "float"))
+
+    def direction(self, v):
+        v = _osl(v)
+        return self._let(OslValue(f"normalize({v.code}[0] * Tn + {v.code}[1] * Bn + {v.code}[2] * N)", "normal"))
+
+    def dot_view(self, d):
+        return self._let(OslValue(f"dot({d.code}, -I)", "float"))
+
+    def _call(self, fn, *args):
+        args = [_osl(a) for a in args]
+        kind = "color" if any(a.kind == "color" for a in args) else "float"
+        return self._let(OslValue(f"{fn}({', '.join(a.code for a in args)})", kind))
+
+    def exp(self, x):
+        return self._call("exp", x)
+
+    def sqrt(self, x):
+        return self._call("sqrt", self.maximum(x, 0.0))
+
+    def log(self, x):
+        return self._call("log", self.maximum(x, 1e-30))
+
+    def minimum(self, a, b):
+        return self._call("min", a, b)
+
+    def maximum(self, a, b):
+        return self._call("max", a, b)
+
+    def scale(self, color, s):
+        return self._let(_osl(color) * s, "color")
+
+    def _closure(self, color, call: str):
+        self.closures.append(f"{_osl(color).code} * {call}")
+
+    def glossy(self, color, alpha, normal):
+        a = _osl(alpha).code
+        self._closure(color, f'microfacet("ggx", {normal.code}, Tn, {a}, {a}, 1.0, 0)')
+
+    def schlick_glossy(self, color, alpha, normal, f0):
+        a = _osl(alpha).code
+        self._closure(1.0, f'generalized_schlick_bsdf({normal.code}, Tn, {_osl(color).code}, color(0), {a}, {a}, '
+                           f'{_osl(f0).code}, color(1), 5.0, "ggx")')
+
+    def diffuse(self, color):
+        self._closure(color, "diffuse(N)")
+
+    def translucent(self, color):
+        self._closure(color, "translucent(N)")
+
+    def transparent(self, color):
+        self._closure(color, "transparent()")
+
+    def conductor(self, color, alpha, eta, k):
+        a = _osl(alpha).code
+        self._closure(color, f'conductor_bsdf(N, Tn, {a}, {a}, {_osl(eta).code}, {_osl(k).code}, "ggx")')
+
+    def dielectric(self, color, alpha, ior):
+        a = _osl(alpha).code
+        self._closure(1.0, f'dielectric_bsdf(N, Tn, {_osl(color).code}, {_osl(color).code}, {a}, {a}, '
+                           f'{_osl(ior).code}, "ggx")')
+
+    def source(self, shader_name: str, header: str) -> str:
+        params = ",\n    ".join(f"{_osl_type(kind)} {osl_identifier(name)} = {_osl_default(kind, d)}"
+                                 for name, kind, d in self.params)
+        body = "\n    ".join(self.lines)
+        bsdf = " +\n        ".join(self.closures) or "0"
+        return (f"{header}\n#include \"stdcycles.h\"\n\n"
+                f"shader {shader_name}(\n    {params},\n    output closure color BSDF = 0)\n{{\n"
+                f"    vector Tn = normalize(dPdu - dot(dPdu, N) * N);\n"
+                f"    vector Bn = cross(N, Tn);\n"
+                f"    {body}\n    BSDF =\n        {bsdf};\n}}\n")
+
+
+def osl_identifier(name: str) -> str:
+    return "".join(c if c.isalnum() else "_" for c in name)
+
+
+def _osl_type(kind: str) -> str:
+    return {"float": "float", "color": "color", "vector": "vector"}[kind]
+
+
+def _osl_default(kind: str, d) -> str:
+    if kind == "float":
+        return _num(d)
+    return "{}({})".format(_osl_type(kind), ", ".join(_num(x) for x in d))
+
+
+def schlick_at_view(b, color, f0, normal):
+    """Node-group approximation: Schlick's Fresnel evaluated at h = normal (exact at the mirror configuration)."""
+    c = 1.0 - b.maximum(b.dot_view(normal), 0.0)
+    c2 = c * c
+    return color * (f0 + (1.0 - f0) * (c2 * c2 * c))
+
+
+def clamp01(b, x):
+    return b.minimum(b.maximum(x, 0.0), 1.0)
+

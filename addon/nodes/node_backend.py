@@ -1,0 +1,227 @@
+"""The ``expr`` backend that builds Cycles shader nodes inside a node group (works on SVM, every GPU, EEVEE)."""
+from __future__ import annotations
+
+import bpy
+
+from .expr import MIN_COS, schlick_at_view
+
+COLUMN = 190
+ROW = 150
+
+
+class NodeValue:
+    """An output socket (float or colour) plus its column in the layout."""
+
+    def __init__(self, backend: "NodeBackend", socket, kind: str, depth: int):
+        self.b, self.socket, self.kind, self.depth = backend, socket, kind, depth
+
+    def __add__(self, o):
+        return self.b.binary("ADD", self, o)
+
+    def __radd__(self, o):
+        return self.b.binary("ADD", o, self)
+
+    def __sub__(self, o):
+        return self.b.binary("SUBTRACT", self, o)
+
+    def __rsub__(self, o):
+        return self.b.binary("SUBTRACT", o, self)
+
+    def __mul__(self, o):
+        return self.b.binary("MULTIPLY", self, o)
+
+    def __rmul__(self, o):
+        return self.b.binary("MULTIPLY", o, self)
+
+    def __truediv__(self, o):
+        return self.b.binary("DIVIDE", self, o)
+
+    def __rtruediv__(self, o):
+        return self.b.binary("DIVIDE", o, self)
+
+    def __neg__(self):
+        return self.b.binary("MULTIPLY", self, -1.0)
+
+
+def _kind(v) -> str:
+    if isinstance(v, NodeValue):
+        return v.kind
+    return "color" if isinstance(v, (tuple, list)) else "float"
+
+
+def _depth(*values) -> int:
+    return 1 + max((v.depth for v in values if isinstance(v, NodeValue)), default=0)
+
+
+class NodeBackend:
+    def __init__(self, tree: bpy.types.NodeTree, group_input, group_output):
+        self.tree = tree
+        self.nodes = tree.nodes
+        self.links = tree.links
+        self.group_input = group_input
+        self.group_output = group_output
+        self._rows: dict[int, int] = {}
+        self._shader = None
+        self._geometry = None
+        self._frame = None
+
+    # -- layout
+    def _node(self, bl_idname: str, depth: int, **props):
+        node = self.nodes.new(bl_idname)
+        for k, v in props.items():
+            setattr(node, k, v)
+        row = self._rows.get(depth, 0)
+        self._rows[depth] = row + 1
+        node.location = (depth * COLUMN, -row * ROW)
+        node.hide = bl_idname in ("ShaderNodeMath", "ShaderNodeVectorMath")
+        return node
+
+    def _link_or_set(self, value, socket):
+        if isinstance(value, NodeValue):
+            self.links.new(value.socket, socket)
+        elif isinstance(value, (tuple, list)):
+            socket.default_value = tuple(value)[: len(socket.default_value)]
+        else:
+            socket.default_value = float(value) if not hasattr(socket.default_value, "__len__") else (value,) * 3
+
+    # -- inputs and geometry
+    def input(self, name: str, kind: str) -> NodeValue:
+        return NodeValue(self, self.group_input.outputs[name], "color" if kind == "vector" else kind, 0)
+
+    def const(self, v):
+        return v
+
+    def geometry(self):
+        if self._geometry is None:
+            geo = self._node("ShaderNodeNewGeometry", 0)
+            tangent = self._node("ShaderNodeTangent", 0, direction_type="UV_MAP")
+            self._geometry = (geo.outputs["Normal"], geo.outputs["Incoming"], tangent.outputs["Tangent"])
+        return self._geometry
+
+    def cos_view(self):
+        normal, incoming, _ = self.geometry()
+        d = self._vector("DOT_PRODUCT", NodeValue(self, normal, "color", 1), NodeValue(self, incoming, "color", 1),
+                         out="Value")
+        return self.maximum(d, MIN_COS)
+
+    def direction(self, v: NodeValue) -> NodeValue:
+        """Tangent-space direction → world: x·T + y·(N×T) + z·N, normalised."""
+        normal, _, tangent = self.geometry()
+        n = NodeValue(self, normal, "color", 1)
+        t = NodeValue(self, tangent, "color", 1)
+        sep = self._node("ShaderNodeSeparateXYZ", _depth(v))
+        self._link_or_set(v, sep.inputs[0])
+        comp = [NodeValue(self, sep.outputs[i], "float", _depth(v)) for i in range(3)]
+        bitangent = self._vector("CROSS_PRODUCT", n, t)
+        world = self.scale(t, comp[0]) + self.scale(bitangent, comp[1]) + self.scale(n, comp[2])
+        return self._vector("NORMALIZE", world)
+
+    def dot_view(self, d: NodeValue):
+        _, incoming, _ = self.geometry()
+        return self._vector("DOT_PRODUCT", d, NodeValue(self, incoming, "color", 1), out="Value")
+
+    # -- math
+    def binary(self, op: str, a, b):
+        if "color" in (_kind(a), _kind(b)):
+            if _kind(a) == "float" and op == "MULTIPLY":
+                a, b = b, a
+            if _kind(b) == "float" and op in ("MULTIPLY", "DIVIDE"):
+                return self.scale(a, b if op == "MULTIPLY" else 1.0 / b)
+            return self._vector(op, _as_color(a), _as_color(b))
+        return self._math(op, a, b)
+
+    def _math(self, op: str, *args):
+        node = self._node("ShaderNodeMath", _depth(*args), operation=op)
+        for value, socket in zip(args, node.inputs):
+            self._link_or_set(value, socket)
+        return NodeValue(self, node.outputs[0], "float", _depth(*args))
+
+    def _vector(self, op: str, *args, out: str = "Vector"):
+        node = self._node("ShaderNodeVectorMath", _depth(*args), operation=op)
+        for value, socket in zip(args, node.inputs):
+            self._link_or_set(value, socket)
+        return NodeValue(self, node.outputs[out], "float" if out == "Value" else "color", _depth(*args))
+
+    def exp(self, x):
+        return self._math("EXPONENT", x)
+
+    def sqrt(self, x):
+        return self._math("SQRT", self.maximum(x, 0.0))
+
+    def log(self, x):
+        return self._math("LOGARITHM", self.maximum(x, 1e-30), 2.718281828459045)
+
+    def minimum(self, a, b):
+        return self._math("MINIMUM", a, b)
+
+    def maximum(self, a, b):
+        return self._math("MAXIMUM", a, b)
+
+    def scale(self, color, s):
+        node = self._node("ShaderNodeVectorMath", _depth(color, s), operation="SCALE")
+        self._link_or_set(color, node.inputs[0])
+        self._link_or_set(s, node.inputs["Scale"])
+        return NodeValue(self, node.outputs["Vector"], "color", _depth(color, s))
+
+    # -- closures, summed with Add Shader nodes into the group output
+    def _closure(self, bl_idname: str, inputs: dict, **props):
+        depth = _depth(*inputs.values()) + 1
+        node = self._node(bl_idname, depth, **props)
+        for name, value in inputs.items():
+            self._link_or_set(value, node.inputs[name])
+        self._add(node.outputs[0], depth)
+
+    def _add(self, shader_socket, depth):
+        if self._shader is None:
+            self._shader = (shader_socket, depth)
+            return
+        prev, prev_depth = self._shader
+        d = max(depth, prev_depth) + 1
+        add = self._node("ShaderNodeAddShader", d)
+        self.links.new(prev, add.inputs[0])
+        self.links.new(shader_socket, add.inputs[1])
+        self._shader = (add.outputs[0], d)
+
+    def finish(self):
+        if self._shader is not None:
+            self.group_output.location = ((self._shader[1] + 1) * COLUMN, 0)
+            self.links.new(self._shader[0], self.group_output.inputs["BSDF"])
+
+    def _roughness(self, alpha):
+        return self.sqrt(alpha)  # closures in nodes take Blender's roughness r, with α = r² (research notes §6)
+
+    def glossy(self, color, alpha, normal):
+        self._closure("ShaderNodeBsdfGlossy", {"Color": color, "Roughness": self._roughness(alpha),
+                                               "Normal": normal}, distribution="GGX")
+
+    def schlick_glossy(self, color, alpha, normal, f0):
+        self.glossy(schlick_at_view(self, color, f0, normal), alpha, normal)
+
+    def diffuse(self, color):
+        self._closure("ShaderNodeBsdfDiffuse", {"Color": color})
+
+    def translucent(self, color):
+        self._closure("ShaderNodeBsdfTranslucent", {"Color": color})
+
+    def transparent(self, color):
+        self._closure("ShaderNodeBsdfTransparent", {"Color": color})
+
+    def conductor(self, color, alpha, eta, k):
+        if hasattr(bpy.types, "ShaderNodeBsdfMetallic"):  # Blender 4.3+
+            self._closure("ShaderNodeBsdfMetallic", {"Base Color": color, "Roughness": self._roughness(alpha),
+                                                     "IOR": eta, "Extinction": k},
+                          distribution="GGX", fresnel_type="PHYSICAL_CONDUCTOR")
+        else:  # 4.2: Principled metal with the normal-incidence reflectance of the complex IOR
+            f0 = ((eta - 1.0) * (eta - 1.0) + k * k) / ((eta + 1.0) * (eta + 1.0) + k * k)
+            self._closure("ShaderNodeBsdfPrincipled", {"Base Color": f0 * color, "Metallic": 1.0,
+                                                       "Roughness": self._roughness(alpha)}, distribution="GGX")
+
+    def dielectric(self, color, alpha, ior):
+        self._closure("ShaderNodeBsdfGlass", {"Color": color, "Roughness": self._roughness(alpha), "IOR": ior},
+                      distribution="GGX")
+
+
+def _as_color(v):
+    if isinstance(v, NodeValue) or isinstance(v, (tuple, list)):
+        return v
+    return (float(v),) * 3
