@@ -161,7 +161,11 @@ def _num(x: float) -> str:
 
 
 class OslBackend:
-    """Emit the body of an OSL surface shader: temporaries as local variables, closures summed into BSDF."""
+    """Emit the body of an OSL surface shader: temporaries as local variables, closures summed into BSDF.
+
+    In Cycles' OSL, ``I`` points from the surface towards the viewer (its Layer Weight shader uses
+    dot(I, N) as the facing cosine), so ωo = I.
+    """
 
     def __init__(self, params: list[tuple[str, str, object]]):
         self.params = params  # (osl name, kind, default)
@@ -183,14 +187,14 @@ class OslBackend:
         return OslValue(name, kind)
 
     def cos_view(self):
-        return self._let(OslValue(f"max(dot(N, -I), {MIN_COS!r})", "float"))
+        return self._let(OslValue(f"max(dot(N, I), {MIN_COS!r})", "float"))
 
     def direction(self, v):
         v = _osl(v)
         return self._let(OslValue(f"normalize({v.code}[0] * Tn + {v.code}[1] * Bn + {v.code}[2] * N)", "normal"))
 
     def dot_view(self, d):
-        return self._let(OslValue(f"dot({d.code}, -I)", "float"))
+        return self._let(OslValue(f"dot({d.code}, I)", "float"))
 
     def _call(self, fn, *args):
         args = [_osl(a) for a in args]
@@ -275,7 +279,7 @@ def schlick_at_view(b, color, f0, normal):
     """Node-group approximation: Schlick's Fresnel evaluated at h = normal (exact at the mirror configuration)."""
     c = 1.0 - b.maximum(b.dot_view(normal), 0.0)
     c2 = c * c
-    return color * (f0 + (1.0 - f0) * (c2 * c2 * c))
+    return color * (f0 + b.scale(1.0 - f0, c2 * c2 * c))
 
 
 def clamp01(b, x):

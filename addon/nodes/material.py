@@ -147,17 +147,22 @@ def shader_node(mat):
 
 
 def _build_tree(mat, model_id: str, p, form: str) -> None:
+    """Replace the material's nodes with the Lamina node in ``form``; nothing is touched if generation fails."""
+    if form == "nodes":
+        group = node_group(model_id, p)
+    else:
+        text = osl_text(model_id, p)
+        oso = osl.compile_source(text.as_string())
     tree = mat.node_tree
     tree.nodes.clear()
     out = tree.nodes.new("ShaderNodeOutputMaterial")
     out.location = (300, 0)
     if form == "nodes":
         node = tree.nodes.new("ShaderNodeGroup")
-        node.node_tree = node_group(model_id, p)
+        node.node_tree = group
     else:
         node = tree.nodes.new("ShaderNodeScript")
-        text = osl_text(model_id, p)
-        osl.load_into_script_node(node, osl.compile_source(text.as_string()))
+        osl.load_into_script_node(node, oso)
         node.label = text.name
     node.name = "Lamina"
     node.width = 240

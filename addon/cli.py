@@ -1,0 +1,179 @@
+"""Headless entry points: ``blender -b -c lamina <command> ...`` and ``python -m addon.cli <command> ...``.
+
+One code path for both (``main(argv)``). Exit codes: 0 success, 1 the work failed, 2 bad arguments;
+a failure prints one line ``lamina: error: <reason>`` on stderr.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+from . import presets
+from .models import MODELS
+from .models.params import ParamError
+
+SCENES = ("sphere", "backlit", "furnace")
+
+
+class CliError(Exception):
+    """A refusal with a one-line reason (exit code 2)."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="lamina", description="Lamina layered materials for Cycles")
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    lp = sub.add_parser("list-presets", help="list the presets of a model")
+    lp.add_argument("--model", default="spongecake", choices=sorted(MODELS))
+
+    mm = sub.add_parser("make-material", help="write a .blend with a Lamina material on a sphere")
+    _material_args(mm)
+    mm.add_argument("--out", required=True, help="the .blend to write (refused if it exists, see --overwrite)")
+    mm.add_argument("--overwrite", action="store_true", help="replace an existing file")
+
+    cp = sub.add_parser("compare", help="render Cycles vs the Python reference; write images and report.json")
+    _material_args(cp)
+    _compare_args(cp)
+    cp.add_argument("--out", required=True, help="output folder (created)")
+
+    dm = sub.add_parser("demo", help="compare every preset and write index.html")
+    _compare_args(dm)
+    dm.add_argument("--out", default="out")
+
+    bn = sub.add_parser("bench", help="benchmarks and accuracy tables (docs/benchmarks.md, docs/accuracy.md)")
+    bn.add_argument("--out", default="docs")
+    bn.add_argument("--samples", type=int, default=64)
+    bn.add_argument("--resolution", type=int, default=64)
+    return ap
+
+
+def _material_args(p) -> None:
+    p.add_argument("--model", default="spongecake", choices=sorted(MODELS))
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--preset", help="a preset name (see list-presets)")
+    g.add_argument("--params", help="a JSON file with the model's parameter dict")
+    p.add_argument("--form", default="nodes", choices=("nodes", "osl"))
+
+
+def _compare_args(p) -> None:
+    p.add_argument("--forms", default="osl,nodes", help="comma-separated: osl, nodes")
+    p.add_argument("--scenes", default=",".join(SCENES), help=f"comma-separated: {', '.join(SCENES)}")
+    p.add_argument("--samples", type=int, default=128, help="Cycles samples per pixel")
+    p.add_argument("--resolution", type=int, default=96, help="image width and height in pixels")
+    p.add_argument("--seed", type=int, default=0)
+
+
+def load_params(args):
+    model = MODELS[args.model]
+    if args.params:
+        try:
+            with open(args.params) as f:
+                data = json.load(f)
+        except (OSError, json.JSONDecodeError) as e:
+            raise CliError(f"cannot read --params {args.params}: {e}") from None
+    else:
+        try:
+            data = presets.load(args.model, args.preset)
+        except KeyError as e:
+            raise CliError(str(e.args[0])) from None
+    try:
+        validated = model.validate(data)
+    except ParamError as e:
+        raise CliError(str(e)) from None
+    for w in validated.warnings:
+        print(f"lamina: warning: {w}", file=sys.stderr)
+    return validated.params
+
+
+def _split(value: str, allowed, what: str) -> list[str]:
+    items = [v.strip() for v in value.split(",") if v.strip()]
+    bad = [v for v in items if v not in allowed]
+    if bad or not items:
+        raise CliError(f"unknown {what} {', '.join(bad) or '(none)'}; expected some of {', '.join(allowed)}")
+    return items
+
+
+def _check_compare_args(args) -> tuple[list[str], list[str]]:
+    if args.samples < 1 or args.resolution < 8:
+        raise CliError("--samples must be ≥ 1 and --resolution ≥ 8")
+    return _split(args.forms, ("osl", "nodes"), "form"), _split(args.scenes, SCENES, "scene")
+
+
+# -------------------------------------------------------------------------------------------- commands
+
+
+def cmd_list_presets(args) -> int:
+    for name in presets.names(args.model):
+        print(f"{name:16s} {presets.description(args.model, name)}")
+    return 0
+
+
+def cmd_make_material(args) -> int:
+    p = load_params(args)
+    out = os.path.abspath(args.out)
+    if os.path.exists(out) and not args.overwrite:
+        raise CliError(f"{out} exists; pass --overwrite to replace it")
+    from .operators import blend_io
+
+    name = args.preset or os.path.splitext(os.path.basename(args.params))[0]
+    blend_io.write_material_blend(args.model, p, args.form, name, out)
+    print(f"lamina: wrote {out}")
+    return 0
+
+
+def cmd_compare(args) -> int:
+    p = load_params(args)
+    forms, scenes = _check_compare_args(args)
+    from .operators import compare_run
+
+    report = compare_run.compare_params(args.model, p, forms, scenes, args.samples, args.resolution, args.seed,
+                                        os.path.abspath(args.out), label=args.preset or "custom")
+    print(compare_run.summary_lines(report))
+    return 0
+
+
+def cmd_demo(args) -> int:
+    forms, scenes = _check_compare_args(args)
+    from .operators import compare_run
+
+    compare_run.demo(forms, scenes, args.samples, args.resolution, args.seed, os.path.abspath(args.out))
+    print(f"lamina: open {os.path.join(os.path.abspath(args.out), 'index.html')}")
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from . import bench
+
+    bench.run(os.path.abspath(args.out), samples=args.samples, resolution=args.resolution)
+    return 0
+
+
+COMMANDS = {"list-presets": cmd_list_presets, "make-material": cmd_make_material, "compare": cmd_compare,
+            "demo": cmd_demo, "bench": cmd_bench}
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # argparse already printed its one-line reason
+        return int(e.code or 0)
+    try:
+        return COMMANDS[args.command](args)
+    except CliError as e:
+        print(f"lamina: error: {e}", file=sys.stderr)
+        return 2
+    except Exception as e:  # noqa: BLE001 - a headless run must end with one line and a status, not a trace
+        print(f"lamina: error: {type(e).__name__}: {e}", file=sys.stderr)
+        return 1
+
+
+def blender_command(argv) -> int:
+    """The handler given to ``bpy.utils.register_cli_command`` (``blender -b -c lamina ...``)."""
+    return main(list(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,34 @@
+"""Blender operators, CLI registration and the window-manager settings they use."""
+import bpy
+
+from . import compare_op, material_ops
+
+classes = (
+    compare_op.LaminaCompareSettings,
+    material_ops.LAMINA_OT_add_spongecake,
+    material_ops.LAMINA_OT_set_form,
+    compare_op.LAMINA_OT_compare,
+)
+
+_cli_handle = None
+
+
+def register():
+    global _cli_handle
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.WindowManager.lamina_compare = bpy.props.PointerProperty(type=compare_op.LaminaCompareSettings)
+    if hasattr(bpy.utils, "register_cli_command"):
+        from .. import cli
+
+        _cli_handle = bpy.utils.register_cli_command("lamina", cli.blender_command)
+
+
+def unregister():
+    global _cli_handle
+    if _cli_handle is not None:
+        bpy.utils.unregister_cli_command(_cli_handle)
+        _cli_handle = None
+    del bpy.types.WindowManager.lamina_compare
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

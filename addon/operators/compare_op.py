@@ -1,0 +1,94 @@
+"""Compare with reference: render the active Lamina material with Cycles and with the Python reference in a
+temporary scene (the user's scene is untouched), step by step from a timer so the UI stays responsive."""
+from __future__ import annotations
+
+import tempfile
+
+import bpy
+
+from ..nodes import material as lamina_material
+from . import compare_run
+
+SCENE_ITEMS = [("ALL", "All scenes", "")] + [(s, s.capitalize(), "") for s in compare_run.SCENES]
+
+
+class LaminaCompareSettings(bpy.types.PropertyGroup):
+    samples: bpy.props.IntProperty(name="Samples", default=64, min=1, max=4096)
+    resolution: bpy.props.IntProperty(name="Resolution", default=96, min=16, max=1024)
+    scene: bpy.props.EnumProperty(name="Scene", items=SCENE_ITEMS, default="sphere")
+    last_report: bpy.props.StringProperty(name="Last report", default="")
+
+
+class LAMINA_OT_compare(bpy.types.Operator):
+    """Render the active Lamina material with Cycles and with the reference, and show both with an error map"""
+
+    bl_idname = "lamina.compare"
+    bl_label = "Compare with Reference"
+
+    _timer = None
+
+    @classmethod
+    def poll(cls, context):
+        return lamina_material.is_lamina(getattr(context, "material", None))
+
+    def invoke(self, context, event):
+        settings = context.window_manager.lamina_compare
+        self._mat = context.material
+        self._scenes = list(compare_run.SCENES) if settings.scene == "ALL" else [settings.scene]
+        self._done = []
+        self._out = tempfile.mkdtemp(prefix="lamina_compare_")
+        wm = context.window_manager
+        wm.progress_begin(0, len(self._scenes))
+        self._timer = wm.event_timer_add(0.05, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):  # scripted use: run every step at once
+        self.invoke(context, None)
+        while self._step(context):
+            pass
+        return self._finish(context)
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._cleanup(context)
+            self.report({"WARNING"}, "Comparison cancelled")
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        if self._step(context):
+            return {"RUNNING_MODAL"}
+        return self._finish(context)
+
+    def _step(self, context) -> bool:
+        """Render the next scene; False when all are done."""
+        if len(self._done) == len(self._scenes):
+            return False
+        scene = self._scenes[len(self._done)]
+        context.workspace.status_text_set(f"Lamina: comparing {self._mat.name} ({scene})…")
+        settings = context.window_manager.lamina_compare
+        self._done.append(compare_run.compare_material(self._mat, [scene], settings.samples, settings.resolution,
+                                                       0, self._out))
+        context.window_manager.progress_update(len(self._done))
+        return True
+
+    def _finish(self, context):
+        self._cleanup(context)
+        report = {k: v for part in self._done for k, v in part.items()}
+        lines = compare_run.scene_lines(report)
+        context.window_manager.lamina_compare.last_report = "\n".join(lines)
+        image = compare_run.show_side_by_side(context, report, self._out)
+        for line in lines:
+            self.report({"INFO"}, line)
+        self.report({"INFO"}, f"Images in {self._out}" + (f"; shown as image {image.name!r}" if image else ""))
+        return {"FINISHED"}
+
+    def _cleanup(self, context):
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+
+

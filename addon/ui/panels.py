@@ -1,0 +1,63 @@
+"""The Lamina panel: add a material, switch its form, compare it with the reference."""
+from __future__ import annotations
+
+import bpy
+
+from ..nodes import material as lamina_material
+
+
+class LAMINA_PT_main(bpy.types.Panel):
+    bl_space_type = "NODE_EDITOR"
+    bl_region_type = "UI"
+    bl_category = "Lamina"
+    bl_label = "Lamina"
+
+    @classmethod
+    def poll(cls, context):
+        space = context.space_data
+        return space is not None and getattr(space, "tree_type", "") == "ShaderNodeTree"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.operator("lamina.add_spongecake", icon="MATERIAL")
+        mat = getattr(context, "material", None)
+        if not lamina_material.is_lamina(mat):
+            layout.label(text="The active material is not a Lamina material", icon="INFO")
+            return
+        box = layout.box()
+        info = lamina_material.info(mat)
+        form = lamina_material.form_of(mat)
+        box.label(text=f"{mat.name}: {info['model']}, {len(info['params']['layers'])} layer(s)")
+        row = box.row(align=True)
+        for value, label in (("nodes", "Node group"), ("osl", "OSL")):
+            op = row.operator("lamina.set_form", text=label, depress=(form == value))
+            op.form = value
+        if form == "osl" and context.scene.render.engine == "CYCLES" and not context.scene.cycles.shading_system:
+            box.label(text="OSL is off in Render Properties: renders black", icon="ERROR")
+        box.label(text="Edit the layer parameters on the Lamina node", icon="NODE")
+
+
+class LAMINA_PT_compare(bpy.types.Panel):
+    bl_space_type = "NODE_EDITOR"
+    bl_region_type = "UI"
+    bl_category = "Lamina"
+    bl_label = "Compare with reference"
+    bl_parent_id = "LAMINA_PT_main"
+
+    @classmethod
+    def poll(cls, context):
+        return lamina_material.is_lamina(getattr(context, "material", None))
+
+    def draw(self, context):
+        layout = self.layout
+        settings = context.window_manager.lamina_compare
+        col = layout.column(align=True)
+        col.prop(settings, "samples")
+        col.prop(settings, "resolution")
+        col.prop(settings, "scene")
+        layout.operator("lamina.compare", icon="IMAGE_REFERENCE")
+        for line in settings.last_report.splitlines():
+            layout.label(text=line)
+
+
+classes = (LAMINA_PT_main, LAMINA_PT_compare)

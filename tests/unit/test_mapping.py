@@ -1,0 +1,79 @@
+"""The Cycles mapping evaluated in numpy (what the node group and OSL forms render), bpy-free."""
+import numpy as np
+import pytest
+
+from addon import presets
+from addon.models import spongecake as model
+from addon.nodes import closures_np, expr
+from addon.nodes import spongecake as mapping
+
+
+def _dirs(n, seed, lower=False):
+    v = np.random.default_rng(seed).normal(size=(n, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    v[:, 2] = -np.abs(v[:, 2]) if lower else np.abs(v[:, 2])
+    return v
+
+
+def _predict(p, wi, wo, form="osl"):
+    b = expr.NumpyBackend(wo, mapping.input_values(p), form=form)
+    mapping.shade(b, p)
+    return b.evaluate(wi), b
+
+
+@pytest.mark.parametrize("form", ["osl", "nodes"])
+def test_thick_surface_layer_maps_to_exactly_half_ggx(form):
+    p = model.params_from_dict(presets.load(model.ID, "thick_flakes"))
+    wi, wo = _dirs(500, 1), _dirs(500, 2)
+    f, _ = _predict(p, wi, wo, form)
+    expected = 0.5 * closures_np.ggx_reflection(wi, wo, 0.3, (0.0, 0.0, 1.0))
+    np.testing.assert_allclose(f, expected, rtol=1e-9, atol=1e-300)
+
+
+def test_node_form_schlick_is_exact_at_the_mirror_configuration():
+    p = model.params_from_dict(presets.load(model.ID, "copper_flakes"))
+    wo = _dirs(200, 3)
+    wi = wo * np.array([-1.0, -1.0, 1.0])
+    exact, _ = _predict(p, wi, wo, "osl")
+    approx, _ = _predict(p, wi, wo, "nodes")
+    np.testing.assert_allclose(approx, exact, rtol=1e-9)
+    off = _dirs(200, 4)
+    assert not np.allclose(_predict(p, off, wo, "nodes")[0], _predict(p, off, wo, "osl")[0], rtol=1e-3)
+
+
+def test_only_the_layers_and_lobes_in_use_are_generated():
+    leaf = model.params_from_dict(presets.load(model.ID, "leaf"))
+    _, b = _predict(leaf, _dirs(4, 5), _dirs(4, 6))
+    kinds = [c[0] for c in b.closures]
+    assert kinds.count("ggx") == 2 and kinds.count("diffuse") == 1 and kinds.count("translucent") == 3
+    assert "transparent" not in kinds
+    shade = model.params_from_dict(presets.load(model.ID, "window_shade"))
+    assert "transparent" in [c[0] for c in _predict(shade, _dirs(4, 5), _dirs(4, 6))[1].closures]
+
+
+@pytest.mark.parametrize("name", presets.names(model.ID))
+def test_mapped_weights_are_finite_and_non_negative_at_grazing(name):
+    p = model.params_from_dict(presets.load(model.ID, name))
+    wo = _dirs(300, 7)
+    wo[:10] = [[np.sqrt(1 - c * c), 0.0, c] for c in np.geomspace(1e-9, 1e-2, 10)]
+    for wi in (_dirs(300, 8), _dirs(300, 9, lower=True)):
+        for form in ("osl", "nodes"):
+            f, b = _predict(p, wi, wo, form)
+            assert np.all(np.isfinite(f)) and np.all(f >= 0)
+            for _, color, _ in b.closures:
+                assert np.all(np.isfinite(color)) and np.all(color >= 0) and np.all(color <= 1.0 + 1e-12)
+
+
+def test_socket_names_come_from_the_declaration():
+    p = model.params_from_dict(presets.load(model.ID, "plastic"))
+    names = [s.name for s in mapping.sockets(p)]
+    assert names == ["L1 Roughness", "L1 Albedo", "L1 Thickness", "L1 F0", "L1 Orientation", "Substrate Albedo"]
+    hg = model.params_from_dict({"layers": [{"type": "hg"}]})
+    assert [s.name for s in mapping.sockets(hg)] == ["L1 Mean Cosine g", "L1 Albedo", "L1 Thickness"]
+
+
+def test_structure_key_ignores_values_but_not_structure():
+    a = model.params_from_dict({"layers": [{"roughness": 0.2}]})
+    b = model.params_from_dict({"layers": [{"roughness": 0.7, "thickness": 3.0}]})
+    c = model.params_from_dict({"layers": [{"roughness": 0.2, "f0": [0.5, 0.5, 0.5]}]})
+    assert mapping.structure_key(a) == mapping.structure_key(b) != mapping.structure_key(c)

@@ -1,0 +1,67 @@
+"""The SpongeCake declaration: parsing, clamping with messages, refusals, presets."""
+import json
+
+import pytest
+
+from addon import presets
+from addon.models import spongecake as model
+from addon.models.params import ParamError
+
+
+def test_every_preset_validates_without_warnings():
+    for name in presets.names(model.ID):
+        v = model.validate(presets.load(model.ID, name))
+        assert v.warnings == [], name
+        assert 1 <= len(v.params.layers) <= model.MAX_LAYERS
+
+
+def test_required_presets_exist():
+    assert {"fabric", "window_shade", "plastic", "sheen", "leaf"} <= set(presets.names(model.ID))
+
+
+def test_round_trip_through_dict_and_json():
+    p = model.params_from_dict(presets.load(model.ID, "leaf"))
+    again = model.params_from_dict(json.loads(json.dumps(p.to_dict())))
+    assert again == p
+
+
+def test_out_of_range_values_are_clamped_with_a_message():
+    v = model.validate({"layers": [{"type": "surface", "roughness": 0.0, "thickness": -3.0,
+                                    "albedo": [2.0, 0.5, float("nan")]}]})
+    layer = v.params.layers[0]
+    assert layer.roughness == model.MIN_FLAKE_ROUGHNESS
+    assert layer.thickness == 0.0
+    assert layer.albedo == (1.0, 0.5, 0.8)
+    assert len(v.warnings) == 4 and all("layer 1" in w for w in v.warnings)
+
+
+def test_hg_mean_cosine_is_clamped_inside_the_open_interval():
+    v = model.validate({"layers": [{"type": "hg", "roughness": -1.0}]})
+    assert v.params.layers[0].roughness == -model.MAX_ABS_G
+
+
+def test_orientation_is_normalised_and_zero_refused_softly():
+    v = model.validate({"layers": [{"orientation": [0, 0, 2]}, {"orientation": [0, 0, 0]}]})
+    assert v.params.layers[0].orientation == (0.0, 0.0, 1.0)
+    assert v.params.layers[1].orientation == (0.0, 0.0, 1.0) and "no direction" in v.warnings[0]
+
+
+@pytest.mark.parametrize("bad, message", [
+    ({"layers": []}, "1 to 4 layers"),
+    ({"layers": [{}] * 5}, "1 to 4 layers"),
+    ({"layers": [{"type": "velvet"}]}, "unknown value 'velvet'"),
+    ({"layers": [{"colour": [1, 1, 1]}]}, "unknown parameter(s) colour"),
+    ({"layers": [{"roughness": "rough"}]}, "expected a number"),
+    ({"layers": [{}], "substrate": {"type": "wood"}}, "substrate"),
+    ({"layers": [{}], "extra": 1}, "unknown key(s) extra"),
+])
+def test_bad_input_is_refused_with_a_clear_message(bad, message):
+    with pytest.raises(ParamError, match=None) as e:
+        model.validate(bad)
+    assert message in str(e.value)
+
+
+def test_unknown_preset_names_the_available_ones():
+    with pytest.raises(KeyError) as e:
+        presets.load(model.ID, "velvet")
+    assert "fabric" in str(e.value)
