@@ -1,0 +1,1 @@
+"""Exact float64 numpy references of the models (bpy-free): ``spongecake`` and its math building blocks."""
