@@ -163,17 +163,17 @@ def test_anisotropic_glossy_tangent_convention(tmp_path):
         assert M.rel_rmse(img, S.reference_image(scene, swapped), mask) > 5e-2
 
 
-def test_osl_material_renders_on_temporary_scene_only(tmp_path):
-    """A material with an OSL script node switches OSL on for the temporary scene, never the user's."""
+def _osl_material(tmp_path, name, source, inputs=()):
+    """A material whose Surface is an OSL script node with internal bytecode (compiled here)."""
     import hashlib
 
     import _cycles
 
-    src = tmp_path / "lamb.osl"
-    src.write_text("shader lamb(output closure color BSDF = 0) { BSDF = color(0.8, 0.5, 0.2) * diffuse(N); }\n")
-    oso = tmp_path / "lamb.oso"
+    src = tmp_path / f"{name}.osl"
+    src.write_text(source)
+    oso = tmp_path / f"{name}.oso"
     assert _cycles.osl_compile(str(src), str(oso))
-    m = bpy.data.materials.new("osl")
+    m = bpy.data.materials.new(name)
     if getattr(m, "node_tree", None) is None:
         m.use_nodes = True
     nt = m.node_tree
@@ -185,14 +185,45 @@ def test_osl_material_renders_on_temporary_scene_only(tmp_path):
     code = oso.read_text()
     script.bytecode = code
     script.bytecode_hash = hashlib.md5(code.encode()).hexdigest()
+    for socket_type, socket_name in inputs:
+        script.inputs.new(socket_type, socket_name)
     script.outputs.new("NodeSocketShader", "BSDF")
     nt.links.new(script.outputs["BSDF"], out.inputs["Surface"])
+    return m, script
+
+
+def test_osl_material_renders_on_temporary_scene_only(tmp_path):
+    """A material with an OSL script node switches OSL on for the temporary scene, never the user's."""
+    m, _ = _osl_material(tmp_path, "lamb", "shader lamb(output closure color BSDF = 0) "
+                                           "{ BSDF = color(0.8, 0.5, 0.2) * diffuse(N); }\n")
     assert material_uses_osl(m) and not material_uses_osl(diffuse_material())
     user = bpy.context.scene
     user.cycles.shading_system = False
     e, *_ = _compare(tmp_path, m, S.plane_scene(elevation_deg=50), lambert(COLOR), 4)
-    assert e < 1e-4
+    assert e < 1e-4  # measured 2e-7
     assert user.cycles.shading_system is False
+
+
+def test_osl_anisotropic_tangent_must_come_from_the_geometry_node(tmp_path):
+    """OSL gets the harness's (= Cycles' default) tangent only through a linked Geometry/Tangent input;
+    normalize(dPdu) on a triangle mesh is a per-triangle barycentric derivative and does not match."""
+    ax, ay = ALPHA * 0.5, ALPHA / 0.5
+    body = 'BSDF = microfacet("ggx", N, T, %r, %r, 1.0, 0);' % (ax, ay)
+    linked, script = _osl_material(
+        tmp_path, "an_linked",
+        "shader an_linked(vector Tangent = 0, output closure color BSDF = 0) { vector T = normalize(Tangent); %s }\n"
+        % body, inputs=[("NodeSocketVector", "Tangent")])
+    geo = linked.node_tree.nodes.new("ShaderNodeNewGeometry")
+    linked.node_tree.links.new(geo.outputs["Tangent"], script.inputs["Tangent"])
+    dpdu, _ = _osl_material(tmp_path, "an_dpdu", "shader an_dpdu(output closure color BSDF = 0) "
+                                                 "{ vector T = normalize(dPdu); %s }\n" % body)
+    for scene in (S.sphere_scene(), S.plane_scene()):
+        ref = S.reference_image(scene, ggx(ax, ay))
+        mask = S.scene_mask(scene)
+        img, _ = render_cycles(linked, scene, 16, 0, str(tmp_path / "l.exr"))
+        assert M.rel_rmse(img, ref, mask) < 5e-3  # measured 6.8e-4 (sphere), 1.7e-3 (plane)
+        img, _ = render_cycles(dpdu, scene, 16, 0, str(tmp_path / "d.exr"))
+        assert M.rel_rmse(img, ref, mask) > 0.1  # measured 1.9 and 0.96
 
 
 def _simple_props(struct):
