@@ -10,6 +10,19 @@ Cycles set-up (research notes section 6): CPU, fixed seed, ``max_bounces`` = 0 (
 limit 0, so only the surface the camera sees is shaded with direct light), pixel filter width 0.01 px,
 no denoising, no adaptive sampling, no clamping, no light threshold, Standard view transform (EXR
 written linear), 32-bit float EXR written with ``write_still`` to a temporary file and renamed.
+The EXR is read back with OpenEXR, whose first scanline is the TOP row, so the returned image has
+row 0 at the top like ``reference_image`` (checked by the tests: a flipped or mirrored image fails).
+
+Geometry accuracy (bpy 5.0.1, Lambert on the 64 x 64 sphere scene, sun 45 deg up): the analytic
+normals of the reference differ from Cycles' interpolated normals of a smooth UV sphere by a relative
+RMSE of 0.9% (32 or 64 segments), 0.08-0.5% (128 x 64) and 0.02-0.03% (256 x 128, the default). The
+mesh gets exact radial custom normals (makes no measurable difference at 256 segments).
+Cycles quirk: with filter_width 0.01 px most samples land at the pixel centre, but a few (about 1 in
+200 with 64 spp) land up to ~0.5 px away; sun-lit scenes are otherwise noise-free, so 16 spp suffice
+there (GGX alpha 0.3: 0.05-0.1% relative RMSE). The furnace is Monte Carlo (world/BSDF MIS):
+GGX alpha 0.3 gives 5% at 16 spp, 0.34% at 256, 0.07% at 1024; a Lambertian is exact at any count.
+Limitation: the render goes through ``bpy.ops.render.render``, so an existing "Render Result"
+image shows the comparison render afterwards (it is not removed; one created by us is).
 """
 from __future__ import annotations
 
@@ -48,7 +61,8 @@ def material_uses_osl(material) -> bool:
 
 
 def _look_at_rotation(direction):
-    """Euler rotation that turns an object's local -Z onto ``direction`` (for a sun: the light travels along -direction... )."""
+    """Euler rotation that turns an object's local +Z onto ``direction``. A sun lamp shines along its
+    local -Z, so with ``direction`` = the unit vector toward the light the light travels along -direction."""
     from mathutils import Vector
 
     return Vector(direction).to_track_quat("Z", "Y").to_euler()

@@ -27,6 +27,9 @@ Scene kinds
             node's Tangent = the "radial Z" tangent built from Generated coordinates, which on a sphere
             centred in its bounding box is exactly this), and it is also dPdu of the UV map the Cycles
             side gives the mesh (u = longitude / 2 pi). At the pole pixel (x = y = 0) t = +x.
+            OSL shaders see this tangent only through an input linked from the Geometry node's Tangent
+            (or a Tangent node, Radial Z); ``normalize(dPdu)`` in OSL is the per-triangle barycentric
+            derivative on meshes and does not match (tests/blender/test_cycles_harness.py).
             The sphere is closed, so light from below the surface is blocked by the sphere itself:
             the reference drops wi with wi.n < 0 (only the reflection lobe shows).
             Cycles renders a smooth-shaded UV sphere mesh (``sphere_segments`` x ``sphere_rings``);
@@ -39,9 +42,10 @@ Scene kinds
             Row r <-> theta_o = (r + 0.5) / H * theta_max (theta_max = 90 deg by default: top row looks
             straight down, bottom row grazes), column c <-> phi_o = (c + 0.5) / W * 360 deg, measured from
             +x toward +y; wo = (sin t cos p, sin t sin p, cos t), the camera ray is -wo. Local frame = world
-            frame (t = +x, b = +y, n = +z; the Cycles side pins its Generated texture space so that the
-            default tangent is +x). The plane is large enough that every pixel hits it, and nothing
-            occludes either hemisphere.
+            frame (t = +x, b = +y, n = +z; the Cycles side pins its Generated texture space far off
+            along +y so that the default tangent is +x: textures driven by Generated coordinates are
+            therefore meaningless on this plane). The plane is large enough that every pixel hits it,
+            and nothing occludes either hemisphere.
             ``plane``: a sun above (reflection); ``backlit``: a sun below the plane (transmission lobe;
             camera above); ``furnace``: no sun, a uniform white environment (radiance 1), so each pixel
             is the directional albedo a(wo) = integral over the whole sphere of f |cos theta_i| (reflection

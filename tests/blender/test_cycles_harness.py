@@ -145,7 +145,7 @@ def test_ggx_glossy_matches_numpy(tmp_path):
     e, *_ = _compare(tmp_path, mat, S.sphere_scene(), f, 16)
     assert e < 3e-3  # measured 9.5e-4
     e, *_ = _compare(tmp_path, mat, S.plane_scene(), f, 16)
-    assert e < 3e-3  # measured 9.7e-4
+    assert e < 3e-3  # measured 4.5e-4
     e, img, ref, _ = _compare(tmp_path, mat, S.furnace_scene(), f, 256, quadrature=(32, 64))
     assert e < 1e-2  # measured 3.5e-3 (Monte Carlo noise of the world/BSDF MIS at 256 spp)
     assert img.mean() / ref.mean() == pytest.approx(1.0, abs=2e-3)
@@ -159,7 +159,7 @@ def test_anisotropic_glossy_tangent_convention(tmp_path):
     for scene in (S.sphere_scene(), S.plane_scene()):
         img, _ = render_cycles(mat, scene, 16, 0, str(tmp_path / "a.exr"))
         mask = S.scene_mask(scene)
-        assert M.rel_rmse(img, S.reference_image(scene, right), mask) < 3e-3  # measured 6.8e-4, 8.6e-4
+        assert M.rel_rmse(img, S.reference_image(scene, right), mask) < 3e-3  # measured 6.8e-4, 1.7e-3
         assert M.rel_rmse(img, S.reference_image(scene, swapped), mask) > 5e-2
 
 
