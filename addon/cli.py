@@ -13,8 +13,9 @@ import sys
 from . import presets
 from .models import MODELS
 from .models.params import ParamError
+from .reference.scenes import KINDS
 
-SCENES = ("sphere", "backlit", "furnace")
+SCENES = KINDS
 
 
 class CliError(Exception):

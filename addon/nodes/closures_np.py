@@ -16,15 +16,17 @@ def _normalize(v):
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)
 
 
-def ggx_d(cos_m, alpha):
-    c2 = cos_m * cos_m
-    t = c2 * (alpha * alpha - 1.0) + 1.0
-    return np.where(cos_m > 0, alpha * alpha / (np.pi * t * t), 0.0)
+def ggx_d(h_local, alpha_x, alpha_y):
+    """Anisotropic GGX NDF for half-vectors in the closure's (tangent, bitangent, normal) frame."""
+    hx, hy, hz = h_local[:, 0] / alpha_x, h_local[:, 1] / alpha_y, h_local[:, 2]
+    t = hx * hx + hy * hy + hz * hz
+    return np.where(hz > 0, 1.0 / (np.pi * alpha_x * alpha_y * t * t), 0.0)
 
 
-def ggx_lambda(cos_v, alpha):
-    c2 = np.clip(cos_v * cos_v, 1e-300, 1.0)
-    return 0.5 * (np.sqrt(1.0 + alpha * alpha * (1.0 - c2) / c2) - 1.0)
+def ggx_lambda(v_local, alpha_x, alpha_y):
+    z2 = np.maximum(v_local[:, 2] ** 2, 1e-300)
+    a2 = (alpha_x * v_local[:, 0]) ** 2 + (alpha_y * v_local[:, 1]) ** 2
+    return 0.5 * (np.sqrt(1.0 + a2 / z2) - 1.0)
 
 
 def schlick(f0, cos_h):
@@ -32,20 +34,33 @@ def schlick(f0, cos_h):
     return f0 + (1.0 - f0) * c**5
 
 
-def ggx_reflection(wi, wo, alpha, normal, f0=None):
-    """GGX microfacet reflection with height-correlated Smith G around ``normal`` (and optional Schlick F)."""
-    alpha = np.broadcast_to(np.asarray(alpha, dtype=float), (len(wi),))
-    n = _normalize(np.broadcast_to(normal, wi.shape))
-    ci, co = _dot(wi, n), _dot(wo, n)
-    ok = (ci > 0) & (co > 0) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
-    h = _normalize(wi + wo)
-    d = ggx_d(_dot(h, n), alpha)
-    g2 = 1.0 / (1.0 + ggx_lambda(ci, alpha) + ggx_lambda(co, alpha))
+def _frame(normal, tangent, n):
+    nz = _normalize(np.broadcast_to(normal, (n, 3)))
+    t = np.broadcast_to(tangent, (n, 3))
+    t = _normalize(t - _dot(t, nz)[:, None] * nz)
+    return t, np.cross(nz, t), nz
+
+
+def ggx_reflection(wi, wo, alpha_x, alpha_y=None, normal=(0.0, 0.0, 1.0), tangent=(1.0, 0.0, 0.0), f0=None):
+    """GGX reflection with height-correlated Smith G around ``normal`` (anisotropic along ``tangent``),
+    times Schlick's F when ``f0`` is given."""
+    n = len(wi)
+    ax = np.broadcast_to(np.asarray(alpha_x, dtype=float), (n,))
+    ay = ax if alpha_y is None else np.broadcast_to(np.asarray(alpha_y, dtype=float), (n,))
+    t, b, nz = _frame(normal, tangent, n)
+
+    def local(v):
+        return np.stack([_dot(v, t), _dot(v, b), _dot(v, nz)], axis=1)
+
+    li, lo = local(wi), local(wo)
+    ok = (li[:, 2] > 0) & (lo[:, 2] > 0) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    h = _normalize(li + lo)
+    g2 = 1.0 / (1.0 + ggx_lambda(li, ax, ay) + ggx_lambda(lo, ax, ay))
     with np.errstate(divide="ignore", invalid="ignore"):
-        f = np.where(ok, d * g2 / (4.0 * np.abs(ci) * np.abs(co)), 0.0)
+        f = np.where(ok, ggx_d(h, ax, ay) * g2 / (4.0 * np.abs(li[:, 2]) * np.abs(lo[:, 2])), 0.0)
     f = np.repeat(f[:, None], 3, axis=1)
     if f0 is not None:
-        f = f * schlick(np.broadcast_to(f0, wi.shape), np.abs(_dot(wi, h)))
+        f = f * schlick(np.broadcast_to(f0, wi.shape), np.abs(_dot(li, h)))
     return f
 
 
@@ -76,7 +91,7 @@ def conductor_fresnel(cos_i, eta, k):
 
 def conductor(wi, wo, alpha, eta, k):
     h = _normalize(wi + wo)
-    return ggx_reflection(wi, wo, alpha, (0.0, 0.0, 1.0)) * conductor_fresnel(np.abs(_dot(wi, h)), eta, k)
+    return ggx_reflection(wi, wo, alpha) * conductor_fresnel(np.abs(_dot(wi, h)), eta, k)
 
 
 def dielectric_fresnel(cos_i, eta):
@@ -91,7 +106,7 @@ def dielectric_fresnel(cos_i, eta):
 def dielectric(wi, wo, alpha, ior):
     """The reflection part of a rough dielectric (the comparison scenes light the outside only)."""
     h = _normalize(wi + wo)
-    return ggx_reflection(wi, wo, alpha, (0.0, 0.0, 1.0)) * dielectric_fresnel(np.abs(_dot(wi, h)), ior)[:, None]
+    return ggx_reflection(wi, wo, alpha) * dielectric_fresnel(np.abs(_dot(wi, h)), ior)[:, None]
 
 
 EVAL = {

@@ -19,6 +19,11 @@ import numpy as np
 
 # Smallest cosine a weight formula divides by: keeps grazing pixels finite (they get weight → 0 anyway).
 MIN_COS = 1e-6
+# Script-node input fed by the Geometry node's Tangent: Cycles' default tangent for anisotropic closures
+# (radial around z of the generated coordinates); OSL's dPdu differs from it (measured, tests/blender).
+TANGENT_INPUT = "LaminaTangent"
+# A direction projected into the tangent plane shorter than this is replaced by the default tangent.
+MIN_TANGENT = 1e-6
 
 
 # --------------------------------------------------------------------------------------------- numpy
@@ -52,8 +57,20 @@ class NumpyBackend:
         v = np.broadcast_to(v, (self.n, 3))
         return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
 
+    def normal(self):
+        return np.broadcast_to(np.array([0.0, 0.0, 1.0]), (self.n, 3))
+
+    def dot(self, a, b):
+        return np.einsum("ij,ij->i", a, b)
+
     def dot_view(self, d):
-        return np.einsum("ij,ij->i", d, self.wo)
+        return self.dot(d, self.wo)
+
+    def tangent_plane(self, d):
+        """``d`` projected into the tangent plane, normalised (the default tangent where it vanishes)."""
+        v = d * np.array([1.0, 1.0, 0.0])
+        length = np.linalg.norm(v, axis=1, keepdims=True)
+        return np.where(length > MIN_TANGENT, v / np.maximum(length, MIN_TANGENT), np.array([1.0, 0.0, 0.0]))
 
     # -- math
     exp = staticmethod(np.exp)
@@ -69,14 +86,12 @@ class NumpyBackend:
     def _add(self, kind, color, **kw):
         self.closures.append((kind, color, kw))
 
-    def glossy(self, color, alpha, normal):
-        self._add("ggx", color, alpha=alpha, normal=normal)
-
-    def schlick_glossy(self, color, alpha, normal, f0):
-        if self.form == "nodes":
-            self.glossy(schlick_at_view(self, color, f0, normal), alpha, normal)
-        else:
-            self._add("ggx", color, alpha=alpha, normal=normal, f0=f0)
+    def glossy(self, color, alpha_x, alpha_y, normal, tangent=None, f0=None):
+        if f0 is not None and self.form == "nodes":
+            color, f0 = schlick_at_view(self, color, f0, normal), None
+        if tangent is None:
+            tangent = self.tangent_plane(np.broadcast_to([1.0, 0.0, 0.0], (self.n, 3)))
+        self._add("ggx", color, alpha_x=alpha_x, alpha_y=alpha_y, normal=normal, tangent=tangent, f0=f0)
 
     def diffuse(self, color):
         self._add("diffuse", color)
@@ -193,8 +208,18 @@ class OslBackend:
         v = _osl(v)
         return self._let(OslValue(f"normalize({v.code}[0] * Tn + {v.code}[1] * Bn + {v.code}[2] * N)", "normal"))
 
+    def normal(self):
+        return OslValue("N", "normal")
+
+    def dot(self, a, b):
+        return self._let(OslValue(f"dot({a.code}, {b.code})", "float"))
+
     def dot_view(self, d):
-        return self._let(OslValue(f"dot({d.code}, I)", "float"))
+        return self.dot(d, OslValue("I", "vector"))
+
+    def tangent_plane(self, d):
+        v = self._let(OslValue(f"{d.code} - dot({d.code}, N) * N", "vector"))
+        return self._let(OslValue(f"length({v.code}) > {MIN_TANGENT!r} ? normalize({v.code}) : Tn", "vector"))
 
     def _call(self, fn, *args):
         args = [_osl(a) for a in args]
@@ -222,14 +247,13 @@ class OslBackend:
     def _closure(self, color, call: str):
         self.closures.append(f"{_osl(color).code} * {call}")
 
-    def glossy(self, color, alpha, normal):
-        a = _osl(alpha).code
-        self._closure(color, f'microfacet("ggx", {normal.code}, Tn, {a}, {a}, 1.0, 0)')
-
-    def schlick_glossy(self, color, alpha, normal, f0):
-        a = _osl(alpha).code
-        self._closure(1.0, f'generalized_schlick_bsdf({normal.code}, Tn, {_osl(color).code}, color(0), {a}, {a}, '
-                           f'{_osl(f0).code}, color(1), 5.0, "ggx")')
+    def glossy(self, color, alpha_x, alpha_y, normal, tangent=None, f0=None):
+        ax, ay, t = _osl(alpha_x).code, _osl(alpha_y).code, "Tn" if tangent is None else tangent.code
+        if f0 is None:
+            self._closure(color, f'microfacet("ggx", {normal.code}, {t}, {ax}, {ay}, 1.0, 0)')
+        else:
+            self._closure(1.0, f'generalized_schlick_bsdf({normal.code}, {t}, {_osl(color).code}, color(0), '
+                               f'{ax}, {ay}, {_osl(f0).code}, color(1), 5.0, "ggx")')
 
     def diffuse(self, color):
         self._closure(color, "diffuse(N)")
@@ -255,8 +279,9 @@ class OslBackend:
         body = "\n    ".join(self.lines)
         bsdf = " +\n        ".join(self.closures) or "0"
         return (f"{header}\n#include \"stdcycles.h\"\n\n"
-                f"shader {shader_name}(\n    {params},\n    output closure color BSDF = 0)\n{{\n"
-                f"    vector Tn = normalize(dPdu - dot(dPdu, N) * N);\n"
+                f"shader {shader_name}(\n    {params},\n    vector {TANGENT_INPUT} = vector(0),\n"
+                f"    output closure color BSDF = 0)\n{{\n"
+                f"    vector Tn = normalize({TANGENT_INPUT} - dot({TANGENT_INPUT}, N) * N);\n"
                 f"    vector Bn = cross(N, Tn);\n"
                 f"    {body}\n    BSDF =\n        {bsdf};\n}}\n")
 

@@ -13,7 +13,7 @@ import bpy
 
 from ..models import MODELS
 from . import MAPPINGS, osl
-from .expr import OslBackend
+from .expr import TANGENT_INPUT, OslBackend
 from .node_backend import NodeBackend
 
 GENERATOR_VERSION = 1  # bump when generated shaders change, so cached groups are not reused
@@ -164,6 +164,10 @@ def _build_tree(mat, model_id: str, p, form: str) -> None:
         node = tree.nodes.new("ShaderNodeScript")
         osl.load_into_script_node(node, oso)
         node.label = text.name
+        geometry = tree.nodes.new("ShaderNodeNewGeometry")
+        geometry.location = (-300, -200)
+        tree.links.new(geometry.outputs["Tangent"], node.inputs[TANGENT_INPUT])
+        node.inputs[TANGENT_INPUT].hide = True
     node.name = "Lamina"
     node.width = 240
     _write_values(node, MAPPINGS[model_id].input_values(p))

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import bpy
 
-from .expr import MIN_COS, schlick_at_view
+from .expr import MIN_COS, MIN_TANGENT, schlick_at_view
 
 COLUMN = 190
 ROW = 150
@@ -93,9 +93,8 @@ class NodeBackend:
 
     def geometry(self):
         if self._geometry is None:
-            geo = self._node("ShaderNodeNewGeometry", 0)
-            tangent = self._node("ShaderNodeTangent", 0, direction_type="UV_MAP")
-            self._geometry = (geo.outputs["Normal"], geo.outputs["Incoming"], tangent.outputs["Tangent"])
+            geo = self._node("ShaderNodeNewGeometry", 0)  # its Tangent is the closures' default tangent
+            self._geometry = (geo.outputs["Normal"], geo.outputs["Incoming"], geo.outputs["Tangent"])
         return self._geometry
 
     def cos_view(self):
@@ -116,9 +115,25 @@ class NodeBackend:
         world = self.scale(t, comp[0]) + self.scale(bitangent, comp[1]) + self.scale(n, comp[2])
         return self._vector("NORMALIZE", world)
 
+    def normal(self):
+        return NodeValue(self, self.geometry()[0], "color", 1)
+
+    def dot(self, a, b):
+        return self._vector("DOT_PRODUCT", a, b, out="Value")
+
     def dot_view(self, d: NodeValue):
-        _, incoming, _ = self.geometry()
-        return self._vector("DOT_PRODUCT", d, NodeValue(self, incoming, "color", 1), out="Value")
+        return self.dot(d, NodeValue(self, self.geometry()[1], "color", 1))
+
+    def tangent_plane(self, d: NodeValue):
+        n = self.normal()
+        t = NodeValue(self, self.geometry()[2], "color", 1)
+        v = d - self.scale(n, self.dot(d, n))
+        use_v = self._math("GREATER_THAN", self._vector("LENGTH", v, out="Value"), MIN_TANGENT)
+        mix = self._node("ShaderNodeMix", _depth(v, use_v), data_type="VECTOR")
+        self._link_or_set(use_v, mix.inputs["Factor"])
+        self._link_or_set(t, mix.inputs[4])  # A (vector)
+        self._link_or_set(self._vector("NORMALIZE", v), mix.inputs[5])  # B (vector)
+        return NodeValue(self, mix.outputs[1], "color", _depth(v, use_v))
 
     # -- math
     def binary(self, op: str, a, b):
@@ -190,12 +205,19 @@ class NodeBackend:
     def _roughness(self, alpha):
         return self.sqrt(alpha)  # closures in nodes take Blender's roughness r, with α = r² (research notes §6)
 
-    def glossy(self, color, alpha, normal):
-        self._closure("ShaderNodeBsdfGlossy", {"Color": color, "Roughness": self._roughness(alpha),
-                                               "Normal": normal}, distribution="GGX")
-
-    def schlick_glossy(self, color, alpha, normal, f0):
-        self.glossy(schlick_at_view(self, color, f0, normal), alpha, normal)
+    def glossy(self, color, alpha_x, alpha_y, normal, tangent=None, f0=None):
+        """Glossy BSDF (GGX). Mappings pass alpha_x ≤ alpha_y; the node's parametrisation is
+        α_u = r²(1 − a), α_v = r²/(1 − a) (Cycles' node_glossy_bsdf), so r⁴ = α_x α_y, a = 1 − sqrt(α_x/α_y)."""
+        if f0 is not None:
+            color = schlick_at_view(self, color, f0, normal)
+        inputs = {"Color": color, "Normal": normal}
+        if alpha_x is alpha_y:
+            inputs["Roughness"] = self._roughness(alpha_x)
+        else:
+            inputs["Roughness"] = self.sqrt(self.sqrt(alpha_x * alpha_y))
+            inputs["Anisotropy"] = 1.0 - self.sqrt(alpha_x / alpha_y)
+            inputs["Tangent"] = tangent
+        self._closure("ShaderNodeBsdfGlossy", inputs, distribution="GGX")
 
     def diffuse(self, color):
         self._closure("ShaderNodeBsdfDiffuse", {"Color": color})

@@ -5,10 +5,12 @@ are evaluated at the mirror configuration ωi = reflect(ωo) ("mirror approximat
 layer is optically thick or the lobe is narrow); docs/accuracy.md names and measures each one:
 
 * surface flakes: reflection = γ · ½(1 − τ²) · GGX(α) around the flake normal, with Schlick F(f0).
-  Exact for Tρ → ∞ (research notes §1: thick surface flakes = ½ GGX with height-correlated Smith);
-  the (1 − τ²) factor is G of Eq. 12 at Λi = Λo. [approx: mirror-G]
-* fiber and hg layers: reflection = Lambert with the single-scattering albedo estimate
-  γ · p_up · ½(1 − τ²). [approx: lambert-lobe]
+  Exact for Tρ → ∞ with the normal along n (research notes §1: thick surface flakes = ½ GGX with
+  height-correlated Smith); the (1 − τ²) factor is G of Eq. 12 at Λi = Λo. [approx: mirror-G]
+  A tilted flake normal keeps the GGX lobe around it. [approx: tilted-flakes]
+* fiber layers: the same with an anisotropic GGX, exact for in-plane fibers (see ``_fiber_lobe``).
+* hg layers: reflection = Lambert with the single-scattering albedo estimate γ · p_up · ½(1 − τ²).
+  [approx: lambert-lobe]
 * every layer: transmission = Lambert translucency with albedo γ · p_down · x e^{−x}, x = Tρ σ(ωo)/cos θo
   (Eq. 14 integrated at ωi = −ωo). [approx: translucent-lobe]
 * attenuation by the layers above (below) is ∏ τ_j(ωo)² for reflection, ∏ τ_j(ωo) both ways for
@@ -95,18 +97,14 @@ def shade(b, p: model.Params) -> None:
     for k, (layer, t) in enumerate(zip(p.layers, terms)):
         above = _prod(*taus[:k]) if k else None
         below = _prod(*taus[k + 1:]) if k + 1 < len(taus) else None
-        gamma = t["albedo"]
-        if layer.type == "surface":
-            color = b.scale(gamma, _prod(0.5 * (1.0 - t["tau"] * t["tau"]), above, above))
-            if layer.has_fresnel:
-                b.schlick_glossy(color, t["alpha"], t["normal"], t["f0"])
-            else:
-                b.glossy(color, t["alpha"], t["normal"])
+        reflected = _prod(0.5 * (1.0 - t["tau"] * t["tau"]), above, above)  # Eq. 12 at Λi = Λo, Sec. 4.3
+        if layer.is_flake:
+            b.glossy(b.scale(t["albedo"], reflected), t["alpha_x"], t["alpha_y"], t["normal"], t.get("tangent"),
+                     t.get("f0"))
         else:
-            p_up = 1.0 - t["p_down"]
-            b.diffuse(b.scale(gamma, p_up * _prod(0.5 * (1.0 - t["tau"] * t["tau"]), above, above)))
+            b.diffuse(b.scale(t["albedo"], (1.0 - t["p_down"]) * reflected))
         x = t["x"]
-        b.translucent(b.scale(gamma, _prod(t["p_down"] * x * b.exp(-x), above, below)))
+        b.translucent(b.scale(t["albedo"], _prod(t["p_down"] * x * b.exp(-x), above, below)))  # Eq. 14 at ωi = −ωo
     stack = _prod(*taus)
     if p.substrate is not None:
         _substrate(b, p.substrate, stack * stack)
@@ -117,23 +115,36 @@ def shade(b, p: model.Params) -> None:
 def _layer_terms(b, k: int, layer: model.Layer, mu) -> dict:
     name = f"L{k + 1} "
     rough = b.input(name + ("Roughness" if layer.is_flake else "Mean Cosine g"), "float")
-    t = {"albedo": b.input(name + "Albedo", "color")}
+    t = {"albedo": b.input(name + "Albedo", "color"), "p_down": P_DOWN[layer.type](b, rough)}
     thickness = b.input(name + "Thickness", "float")
+    sigma = 1.0
     if layer.is_flake:
         direction = b.direction(b.input(name + "Orientation", "vector"))
         c = b.dot_view(direction)
         a2 = rough * rough
         # σ(ωo) = sqrt(ωoᵀ S ωo) for S of Sec. 3.3 rotated to the orientation (research notes §1)
-        sigma = b.sqrt(a2 + (1.0 - a2) * c * c) if layer.type == "surface" else b.sqrt(1.0 + (a2 - 1.0) * c * c)
-        t.update(alpha=rough, normal=direction)
+        if layer.type == "surface":
+            sigma = b.sqrt(a2 + (1.0 - a2) * c * c)
+            t.update(alpha_x=rough, alpha_y=rough, normal=direction)
+        else:
+            sigma = b.sqrt(1.0 + (a2 - 1.0) * c * c)
+            t.update(_fiber_lobe(b, rough, direction))
         if layer.has_fresnel:
             t["f0"] = b.input(name + "F0", "color")
-    else:
-        sigma = 1.0
     t["x"] = thickness * sigma / mu
     t["tau"] = b.exp(-t["x"])
-    t["p_down"] = P_DOWN[layer.type](b, rough)
     return t
+
+
+def _fiber_lobe(b, alpha, tangent) -> dict:
+    """Fibers along an in-plane tangent t: S = diag(α², 1, 1) in (t, n×t, n), so D is the anisotropic GGX with
+    (α_t, α_b) = (α, 1) and Λ_sggx = 1 + 2Λ_smith — exact, like surface flakes. Tilting t out of the plane
+    blends α_t towards 1 (isotropic GGX α = 1 for fibers along n, whose exact lobe, GGX with α = 1/α > 1,
+    Cycles cannot express). [approx: tilted-fiber]"""
+    c = b.dot(tangent, b.normal())
+    in_plane = 1.0 - c * c
+    return {"alpha_x": 1.0 + (alpha - 1.0) * in_plane, "alpha_y": 1.0, "normal": b.normal(),
+            "tangent": b.tangent_plane(tangent)}
 
 
 def _substrate(b, s: model.Substrate, weight) -> None:

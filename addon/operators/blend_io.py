@@ -1,12 +1,10 @@
 """Write a self-contained .blend with a Lamina material on a lit sphere (no add-on needed to render it)."""
 from __future__ import annotations
 
-import os
-import tempfile
-
 import bpy  # noqa: I001 - bpy must be imported before bmesh in the bpy module
 import bmesh
 
+from ..bake.exr import atomic_path
 from ..nodes import material as lamina_material
 
 
@@ -49,19 +47,13 @@ def preview_scene(mat, name: str) -> bpy.types.Scene:
 
 def write_material_blend(model_id: str, p, form: str, name: str, path: str) -> None:
     """Build the material and its preview scene, write only them to ``path`` atomically, then remove them."""
-    before = _snapshot()
+    before = snapshot()
     mat = lamina_material.new_material(model_id, p, form, name=f"Lamina {name}")
     scene = preview_scene(mat, name)
-    folder = os.path.dirname(path) or "."
-    os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=".blend", dir=folder, prefix=".lamina_")
-    os.close(fd)
     try:
-        bpy.data.libraries.write(tmp, {scene}, fake_user=True)
-        os.replace(tmp, path)
+        with atomic_path(path) as tmp:
+            bpy.data.libraries.write(tmp, {scene}, fake_user=True)
     finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
         remove_new_data(before)
 
 
@@ -69,7 +61,7 @@ COLLECTIONS = ("scenes", "objects", "meshes", "materials", "node_groups", "texts
                "worlds", "images")
 
 
-def _snapshot() -> dict:
+def snapshot() -> dict:
     return {c: set(getattr(bpy.data, c)) for c in COLLECTIONS}
 
 

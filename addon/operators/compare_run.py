@@ -1,4 +1,168 @@
-"""Comparison runs shared by the operator, the CLI, the demo and the benchmarks (bpy)."""
+"""Comparison runs shared by the operator, the CLI, the demo and the benchmarks (bpy).
+
+A run renders a Lamina material with Cycles and with the bundled reference on the standard scenes
+(``reference.scenes``) and also measures the mapping alone: the numpy prediction of what the form renders
+against the reference, which separates the approximation's error from Cycles' sampling noise.
+"""
 from __future__ import annotations
 
-SCENES = ("sphere", "backlit", "furnace")
+import html
+import importlib
+import json
+import os
+
+from .. import presets
+from ..bake.exr import atomic_path, read_exr
+from ..models import MODELS
+from ..nodes import material as lamina_material
+from ..nodes import predicted_eval
+from ..reference import metrics
+from ..reference import scenes as ref_scenes
+from . import blend_io, compare_core
+
+SCENES = ref_scenes.KINDS
+
+
+def write_text_atomic(path: str, text: str) -> None:
+    with atomic_path(path) as tmp, open(tmp, "w") as f:
+        f.write(text)
+
+
+def scene_specs(names, resolution: int):
+    by_name = {s.name: s for s in ref_scenes.default_scenes(resolution)}
+    return [by_name[n] for n in names]
+
+
+def reference_module(model_id: str):
+    return importlib.import_module(f"..reference.{model_id}", __package__)
+
+
+# Samples per pixel of the reference's directional albedo (furnace scene): ~0.7% relative noise.
+ALBEDO_SAMPLES = 4096
+
+
+def reference_functions(model_id: str, p):
+    """(eval, albedo) of the exact reference for ``p``: what every comparison measures against."""
+    ref = reference_module(model_id)
+    return (lambda wi, wo: ref.eval(p, wi, wo)), (lambda wo: ref.directional_albedo(p, wo, n=ALBEDO_SAMPLES))
+
+
+def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_dir: str, progress=None) -> dict:
+    """Cycles vs reference for an existing Lamina material (it is assigned to temporary objects, never edited)."""
+    model_id, p = lamina_material.current_params(mat)
+    bsdf_eval, bsdf_albedo = reference_functions(model_id, p)
+    specs = scene_specs(scenes, resolution)
+    report = compare_core.compare(mat, bsdf_eval, specs, samples, seed, out_dir, progress, bsdf_albedo=bsdf_albedo)
+    predicted = predicted_eval(model_id, p, lamina_material.form_of(mat))
+    for spec in specs:
+        reference = read_exr(report[spec.name]["files"]["reference"], "RGB")
+        report[spec.name]["mapping_rel_rmse"] = mapping_error(spec, predicted, reference)
+    return report
+
+
+def mapping_error(spec, predicted, reference) -> float:
+    """Relative RMSE of a form's numpy prediction against the reference image (no sampling noise)."""
+    approx = ref_scenes.reference_image(spec, predicted)
+    return metrics.rel_rmse(approx, reference, ref_scenes.scene_mask(spec))
+
+
+def compare_params(model_id: str, p, forms, scenes, samples: int, resolution: int, seed: int, out_dir: str,
+                   label: str = "custom") -> dict:
+    """Build a temporary material per form, compare it, remove it again; write ``report.json``."""
+    report = {"model": model_id, "label": label, "params": p.to_dict(), "samples": samples,
+              "resolution": resolution, "seed": seed, "forms": {}}
+    for form in forms:
+        before = blend_io.snapshot()
+        try:
+            mat = lamina_material.new_material(model_id, p, form, name=f"Lamina compare {label}")
+            entries = compare_material(mat, scenes, samples, resolution, seed, os.path.join(out_dir, form))
+        finally:
+            blend_io.remove_new_data(before)
+        report["forms"][form] = {scene: _json_entry(e, out_dir) for scene, e in entries.items()}
+    write_text_atomic(os.path.join(out_dir, "report.json"), json.dumps(report, indent=2))
+    return report
+
+
+REPORT_KEYS = ("rmse", "rel_rmse", "max_abs_error", "mapping_rel_rmse", "cycles_seconds", "reference_seconds",
+               "samples", "worst_pixels", "files")
+
+
+def _json_entry(entry: dict, out_dir: str) -> dict:
+    out = {k: entry[k] for k in REPORT_KEYS if k in entry}
+    out["files"] = {k: os.path.relpath(v, out_dir) for k, v in entry["files"].items()}
+    out["worst_pixels"] = [[int(r), int(c), [float(x) for x in a], [float(x) for x in b]]
+                           for r, c, a, b in entry["worst_pixels"]]
+    return out
+
+
+def scene_lines(entries: dict) -> list[str]:
+    return [f"{scene}: rel. RMSE {e['rel_rmse']:.2%} (mapping alone {e['mapping_rel_rmse']:.2%}), "
+            f"Cycles {e['cycles_seconds']:.2f} s, reference {e['reference_seconds']:.2f} s"
+            for scene, e in entries.items()]
+
+
+def summary_lines(report: dict) -> str:
+    lines = [f"{report['model']} {report['label']}:"]
+    for form, entries in report["forms"].items():
+        lines += [f"  {form:5s} {line}" for line in scene_lines(entries)]
+    return "\n".join(lines)
+
+
+def show_side_by_side(context, entries: dict, out_dir: str):
+    """Load the first scene's side-by-side picture as the image "Lamina Compare" and show it in an Image Editor."""
+    import bpy
+
+    path = next(iter(entries.values()))["files"]["side_by_side"]
+    image = bpy.data.images.get("Lamina Compare")
+    if image is None:
+        image = bpy.data.images.load(path)
+        image.name = "Lamina Compare"
+    else:
+        image.filepath = path
+        image.reload()
+    for area in context.screen.areas if context.screen else ():
+        if area.type == "IMAGE_EDITOR":
+            area.spaces.active.image = image
+            break
+    return image
+
+
+# ------------------------------------------------------------------------------------------------ demo
+
+
+def demo(forms, scenes, samples: int, resolution: int, seed: int, out_dir: str, model_id: str = "spongecake"):
+    """Compare every preset and write ``index.html`` (what a new user looks at first)."""
+    reports = []
+    for name in presets.names(model_id):
+        p = MODELS[model_id].params_from_dict(presets.load(model_id, name))
+        print(f"lamina: {name}…", flush=True)
+        report = compare_params(model_id, p, forms, scenes, samples, resolution, seed, os.path.join(out_dir, name),
+                                label=name)
+        print(summary_lines(report), flush=True)
+        reports.append(report)
+    write_text_atomic(os.path.join(out_dir, "index.html"), index_html(reports, model_id))
+    return reports
+
+
+def index_html(reports, model_id: str) -> str:
+    rows = []
+    for r in reports:
+        name = r["label"]
+        rows.append(f"<h2>{html.escape(name)}</h2><p>{html.escape(presets.description(model_id, name))}</p>")
+        rows.append("<table><tr><th>form</th><th>scene</th><th>rel. RMSE</th><th>mapping alone</th>"
+                    "<th>Cycles s</th><th>reference s</th><th>Cycles | reference | error</th></tr>")
+        for form, entries in r["forms"].items():
+            for scene, e in entries.items():
+                img = html.escape(f"{name}/{e['files']['side_by_side']}")
+                rows.append(f"<tr><td>{form}</td><td>{scene}</td><td>{e['rel_rmse']:.2%}</td>"
+                            f"<td>{e['mapping_rel_rmse']:.2%}</td><td>{e['cycles_seconds']:.2f}</td>"
+                            f"<td>{e['reference_seconds']:.2f}</td><td><img src=\"{img}\"></td></tr>")
+        rows.append("</table>")
+    style = ("body{font-family:sans-serif;background:#222;color:#ddd}td,th{padding:4px 8px}"
+             "img{image-rendering:pixelated;height:128px}")
+    return (f"<!doctype html><html><head><meta charset=utf-8><title>Lamina {model_id} presets</title>"
+            f"<style>{style}</style></head><body><h1>Lamina: {model_id} presets, Cycles vs reference</h1>"
+            f"<p>Samples {reports[0]['samples']}, resolution {reports[0]['resolution']}, seed {reports[0]['seed']}. "
+            f"Relative RMSE = RMSE / mean of the reference over the object; 'mapping alone' is the noise-free "
+            f"error of the form's closures against the reference (docs/accuracy.md).</p>"
+            + "\n".join(rows) + "</body></html>")

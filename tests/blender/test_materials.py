@@ -58,6 +58,7 @@ def test_osl_form_keeps_readable_source_and_internal_bytecode():
     assert "shader lamina_spongecake" in text.as_string()
     names = {p.name for p in osl.parse_params(node.bytecode) if not p.output}
     assert names == {s.name for s in node.inputs}
+    assert node.inputs["LaminaTangent"].links[0].from_socket.name == "Tangent"
 
 
 def test_switching_form_keeps_edited_values():

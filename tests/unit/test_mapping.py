@@ -26,7 +26,7 @@ def test_thick_surface_layer_maps_to_exactly_half_ggx(form):
     p = model.params_from_dict(presets.load(model.ID, "thick_flakes"))
     wi, wo = _dirs(500, 1), _dirs(500, 2)
     f, _ = _predict(p, wi, wo, form)
-    expected = 0.5 * closures_np.ggx_reflection(wi, wo, 0.3, (0.0, 0.0, 1.0))
+    expected = 0.5 * closures_np.ggx_reflection(wi, wo, 0.3)
     np.testing.assert_allclose(f, expected, rtol=1e-9, atol=1e-300)
 
 
@@ -77,3 +77,18 @@ def test_structure_key_ignores_values_but_not_structure():
     b = model.params_from_dict({"layers": [{"roughness": 0.7, "thickness": 3.0}]})
     c = model.params_from_dict({"layers": [{"roughness": 0.2, "f0": [0.5, 0.5, 0.5]}]})
     assert mapping.structure_key(a) == mapping.structure_key(b) != mapping.structure_key(c)
+
+
+@pytest.mark.parametrize("layer", [
+    {"type": "surface", "roughness": 0.3, "orientation": [0, 0, 1]},
+    {"type": "fiber", "roughness": 0.3, "orientation": [1, 0, 0]},
+    {"type": "fiber", "roughness": 0.05, "orientation": [0, 1, 0]},
+])
+def test_thick_flake_layers_map_exactly_onto_ggx_lobes(layer):
+    """Research notes §1 generalised: an SGGX matrix with the normal as eigenvector is an (anisotropic) GGX."""
+    from addon.reference import spongecake as reference
+
+    p = model.params_from_dict({"layers": [{**layer, "thickness": 1e4, "albedo": [1, 1, 1]}]})
+    wi, wo = _dirs(2000, 11), _dirs(2000, 12)
+    f, _ = _predict(p, wi, wo)
+    np.testing.assert_allclose(f, reference.eval(p, wi, wo), rtol=1e-9, atol=1e-300)
