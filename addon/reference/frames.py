@@ -11,7 +11,7 @@ def dot(a, b):
 
 def normalize(v):
     """Rows of ``v`` scaled to unit length; zero rows stay zero."""
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    n = np.sqrt(dot(v, v))[..., None]
     return np.divide(v, n, out=np.zeros_like(v, dtype=float), where=n > 0)
 
 

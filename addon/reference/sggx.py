@@ -2,7 +2,8 @@
 
 S = a I + (b - a) v v^T: eigenvalue b along the unit axis v, a across it. Surface flakes (normal n):
 S = alpha^2 I + (1 - alpha^2) n n^T; fibers (tangent t): S = I + (alpha^2 - 1) t t^T (Sec. 3.3). Quadratic
-forms use x^T S y = a (x x v).(y x v) + b (x.v)(y.v), exact without cancellation, so alpha = 1e-4 is safe.
+forms use the coordinates (x1, x2, x3) of x in an orthonormal frame (e1, e2, v) of the axis:
+x^T S y = a (x1 y1 + x2 y2) + b x3 y3, free of cancellation, so alpha = 1e-4 is safe.
 D is normalised as in Heitz et al. 2015: the projected area int D(m) <w, m> dm equals sigma(w) = sqrt(w^T S w).
 """
 from __future__ import annotations
@@ -42,9 +43,17 @@ def matrix(s: SGGX):
     return s.a * np.eye(3) + (s.b - s.a) * np.outer(s.axis, s.axis)
 
 
+def _coords(s: SGGX, x):
+    """Coordinates of the rows x in the orthonormal frame (e1, e2, axis)."""
+    e1, e2 = basis(s.axis)
+    return x @ np.stack([e1, e2, s.axis], axis=1)
+
+
 def _forms(s: SGGX, x, y):
-    """(x x v).(y x v) and (x.v)(y.v): the two pieces of every quadratic form of S."""
-    return dot(np.cross(x, s.axis), np.cross(y, s.axis)), dot(x, s.axis) * dot(y, s.axis)
+    """x1 y1 + x2 y2 and x3 y3: the pieces of every quadratic form of S across and along the axis."""
+    cx = _coords(s, x)
+    cy = cx if y is x else _coords(s, y)
+    return cx[:, 0] * cy[:, 0] + cx[:, 1] * cy[:, 1], cx[:, 2] * cy[:, 2]
 
 
 def quad(s: SGGX, x, y):

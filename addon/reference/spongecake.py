@@ -98,7 +98,7 @@ def _phase_value(layer: Layer, wi, wo):
     """F(h) f_p(wi -> wo), (N, 3): the flake phase function D(h) / (4 sigma(wi)) (Eq. 4) with Schlick's F on
     |wi . h| (f0 = 1 gives F = 1), or Henyey-Greenstein."""
     p = _phase_pdf(layer, wi, wo)[:, None]
-    if not layer.is_flake:
+    if not layer.has_fresnel:
         return p * np.ones(3)
     return microfacet.schlick(layer.f0, dot(wi, sggx.half_vector(wi, wo)[0])) * p
 
@@ -257,9 +257,11 @@ def sample(params: Params, wi, u) -> Sample:
 # ------------------------------------------------------------------------------------- directional albedo
 
 def _stratified(n, rng):
-    """n points of [0, 1)^3: u0 in n jittered strata, (u1, u2) in a jittered sqrt(n) x sqrt(n) grid, shuffled."""
+    """k^2 <= n points of [0, 1)^3 (k = floor(sqrt(n))): u0 in k^2 jittered strata, (u1, u2) one per cell of a
+    jittered k x k grid, the two stratifications randomly paired."""
     side = int(np.sqrt(n))
-    cells = rng.permutation(n) % (side * side)
+    n = side * side
+    cells = rng.permutation(n)
     u0 = (rng.permutation(n) + rng.random(n)) / n
     u1 = (cells // side + rng.random(n)) / side
     u2 = (cells % side + rng.random(n)) / side
@@ -275,12 +277,11 @@ def directional_albedo(params: Params, wo, n: int = 16384, seed: int = 0, split:
     """
     wo = as_directions(wo)
     rng = np.random.default_rng(seed)
-    n_b = (7 * n) // 8
-    n_u = n - n_b
     reflection, transmission = np.zeros((len(wo), 3)), np.zeros((len(wo), 3))
     for row, w in enumerate(wo):
-        s = sample(params, np.repeat(w[None], n_b, axis=0), _stratified(n_b, rng))
-        u = _stratified(n_u, rng)
+        u_b, u = _stratified((7 * n) // 8, rng), _stratified(n // 8, rng)
+        n_b, n_u = len(u_b), len(u)
+        s = sample(params, np.repeat(w[None], n_b, axis=0), u_b)
         x_u = spherical(2.0 * u[:, 1] - 1.0, 2.0 * np.pi * u[:, 2])
         x = np.concatenate([s.wo[~s.is_delta], x_u])
         ws = np.repeat(w[None], len(x), axis=0)
@@ -330,30 +331,36 @@ def _free_flight(params: Params, z, d, rng):
     return z, layer, collided
 
 
-def _nee(params: Params, state, wo_pairs, kappa_o, slots, sums):
+def _nee(params: Params, state, wo_pairs, kappa_o, slots, sums, chunk=1 << 19):
     """Next-event estimation from every vertex to each wo of its group, added to ``sums`` (N, 3) per pair."""
     z, d, beta, layer, surface, group = state
-    n_layers = len(params.layers)
-    for slot in slots.T:
-        pair = slot[group]
-        valid = pair >= 0
-        pair_v = np.where(valid, pair, 0)
-        w = wo_pairs[pair_v]
-        up = w[:, 2] > 0
-        j = np.arange(n_layers)[:, None]
-        overlap = np.where(up, np.clip(z - j, 0.0, 1.0), np.clip(j + 1 - z, 0.0, 1.0))
-        transmittance = np.exp(-np.sum(kappa_o[:, pair_v] * overlap, axis=0))
-        value = np.zeros((len(z), 3))
-        for k, lay in enumerate(params.layers):
-            m = valid & ~surface & (layer == k)
-            value[m] = np.asarray(lay.albedo) * _phase_value(lay, -d[m], w[m]) / np.abs(w[m, 2:])
-        if params.substrate is not None:
-            value[~surface & ~up] = 0.0  # the substrate blocks transmission out of the stack
-            m = valid & surface
-            value[m] = _substrate_bsdf(params.substrate, -d[m], w[m])
-        contribution = beta * value * transmittance[:, None]
+    vertex, slot = np.nonzero(slots[group] >= 0)
+    for start in range(0, len(vertex), chunk):
+        v = vertex[start:start + chunk]
+        pair = slots[group[v], slot[start:start + chunk]]
+        contribution = beta[v] * _vertex_to(params, z[v], -d[v], layer[v], surface[v], wo_pairs[pair], kappa_o[:, pair])
         for c in range(3):
-            sums[:, c] += np.bincount(pair_v[valid], weights=contribution[valid, c], minlength=len(sums))
+            sums[:, c] += np.bincount(pair, weights=contribution[:, c], minlength=len(sums))
+
+
+def _vertex_to(params: Params, z, wi, layer, surface, wo, kappa_o):
+    """Radiance towards wo per unit incident power at vertices at depth z (light arriving from wi), (N, 3)."""
+    up = wo[:, 2] > 0
+    j = np.arange(len(params.layers))[:, None]
+    overlap = np.where(up, np.clip(z - j, 0.0, 1.0), np.clip(j + 1 - z, 0.0, 1.0))
+    transmittance = np.exp(-np.sum(kappa_o * overlap, axis=0))
+    value = np.zeros((len(z), 3))
+    for k, lay in enumerate(params.layers):
+        # volume vertex: albedo F f_p / |cos wo| (position-free form of the path integral, Guo et al. 2018)
+        m = ~surface & (layer == k)
+        if m.all():
+            value = np.asarray(lay.albedo) * _phase_value(lay, wi, wo) / np.abs(wo[:, 2:])
+        elif m.any():
+            value[m] = np.asarray(lay.albedo) * _phase_value(lay, wi[m], wo[m]) / np.abs(wo[m, 2:])
+    if params.substrate is not None:
+        value[~surface & ~up] = 0.0  # the substrate blocks transmission out of the stack
+        value[surface] = _substrate_bsdf(params.substrate, wi[surface], wo[surface])
+    return value * transmittance[:, None]
 
 
 def _scatter(params: Params, state, rng):
