@@ -16,7 +16,7 @@ def ggx_d(m, alpha):
     """GGX normal distribution D(m) = alpha^2 / (pi (sin^2 + alpha^2 cos^2)^2), zero below the horizon."""
     a2 = alpha * alpha
     q = m[:, 0] ** 2 + m[:, 1] ** 2 + a2 * m[:, 2] ** 2
-    return np.where(m[:, 2] > 0, a2 / (np.pi * q * q), 0.0)
+    return np.divide(a2, np.pi * q * q, out=np.zeros_like(q), where=m[:, 2] > 0)
 
 
 def smith_lambda(w, alpha):

@@ -384,6 +384,16 @@ def _scatter(params: Params, state, rng):
     return tuple(a[keep] for a in (z, d_new, beta, layer, np.zeros_like(surface), group))
 
 
+def _slots(group_of_pair, pair_index, n_groups):
+    """(groups, most pairs per group) table of the pair indices of each group, padded with -1."""
+    counts = np.bincount(group_of_pair, minlength=n_groups)
+    slots = np.full((n_groups, counts.max()), -1)
+    order = np.argsort(group_of_pair, kind="stable")
+    rank = np.arange(len(order)) - np.repeat(np.cumsum(counts) - counts, counts)
+    slots[group_of_pair[order], rank] = pair_index[order]
+    return slots
+
+
 def ground_truth(params: Params, wi, wo, n_paths: int = 20000, seed: int = 0, max_depth: int = 20):
     """Independent Monte Carlo f(wi, wo) by a volumetric random walk: (order 1, orders >= 2), each (N, 3).
 
@@ -391,14 +401,14 @@ def ground_truth(params: Params, wi, wo, n_paths: int = 20000, seed: int = 0, ma
     closed form of ``eval``. Paths of one wi are shared by all pairs with that wi (next-event estimation).
     """
     wi, wo = as_directions(wi), as_directions(wo)
+    sums = [np.zeros((len(wi), 3)), np.zeros((len(wi), 3))]
+    ok = (wi[:, 2] != 0) & (wo[:, 2] != 0)  # f = 0 at grazing, as in eval
+    if not ok.any():
+        return tuple(sums)
     rng = np.random.default_rng(seed)
     n_layers = len(params.layers)
-    sources, group_of_pair = np.unique(wi, axis=0, return_inverse=True)
-    group_of_pair = group_of_pair.ravel()
-    counts = np.bincount(group_of_pair, minlength=len(sources))
-    slots = np.full((len(sources), counts.max()), -1)
-    order = np.argsort(group_of_pair, kind="stable")
-    slots[group_of_pair[order], np.arange(len(wi)) - np.repeat(np.cumsum(counts) - counts, counts)] = order
+    sources, group_of_pair = np.unique(wi[ok], axis=0, return_inverse=True)
+    slots = _slots(group_of_pair.ravel(), np.flatnonzero(ok), len(sources))
     kappa_o = _exit_depths(params, wo)
 
     group = np.repeat(np.arange(len(sources)), n_paths)
@@ -407,7 +417,6 @@ def ground_truth(params: Params, wi, wo, n_paths: int = 20000, seed: int = 0, ma
     z = np.where(from_below, float(n_layers), 0.0)
     surface = from_below & (params.substrate is not None)
     state = (z, d, np.ones((len(z), 3)), np.zeros(len(z), int), surface, group)
-    sums = [np.zeros((len(wi), 3)), np.zeros((len(wi), 3))]
     for depth in range(max_depth):
         z, d, beta, layer, surface, group = state
         fly = ~surface
@@ -423,5 +432,4 @@ def ground_truth(params: Params, wi, wo, n_paths: int = 20000, seed: int = 0, ma
             break
         _nee(params, state, wo, kappa_o, slots, sums[min(depth, 1)])
         state = _scatter(params, state, rng)
-    ok = ((wi[:, 2] != 0) & (wo[:, 2] != 0))[:, None]
-    return tuple(np.where(ok, s / n_paths, 0.0) for s in sums)
+    return tuple(s / n_paths for s in sums)
