@@ -78,6 +78,11 @@ class NumpyBackend:
     log = staticmethod(lambda x: np.log(np.maximum(x, 1e-300)))
     minimum = staticmethod(np.minimum)
     maximum = staticmethod(np.maximum)
+    abs = staticmethod(np.abs)
+
+    @staticmethod
+    def step_below(x, edge):
+        return np.where(x < edge, 1.0, 0.0)
 
     def scale(self, color, s):
         return color * np.asarray(s)[..., None]
@@ -92,6 +97,9 @@ class NumpyBackend:
         if tangent is None:
             tangent = self.tangent_plane(np.broadcast_to([1.0, 0.0, 0.0], (self.n, 3)))
         self._add("ggx", color, alpha_x=alpha_x, alpha_y=alpha_y, normal=normal, tangent=tangent, f0=f0)
+
+    def flake_transmission(self, color, alpha, normal):
+        self._add("ggx_transmission", color, alpha=alpha, normal=normal)
 
     def diffuse(self, color):
         self._add("diffuse", color)
@@ -235,6 +243,12 @@ class OslBackend:
     def log(self, x):
         return self._call("log", self.maximum(x, 1e-30))
 
+    def abs(self, x):
+        return self._call("abs", x)
+
+    def step_below(self, x, edge):
+        return self._let(OslValue(f"({_osl(x).code} < {_osl(edge).code} ? 1.0 : 0.0)", "float"))
+
     def minimum(self, a, b):
         return self._call("min", a, b)
 
@@ -254,6 +268,10 @@ class OslBackend:
         else:
             self._closure(1.0, f'generalized_schlick_bsdf({normal.code}, {t}, {_osl(color).code}, color(0), '
                                f'{ax}, {ay}, {_osl(f0).code}, color(1), 5.0, "ggx")')
+
+    def flake_transmission(self, color, alpha, normal):
+        a = _osl(alpha).code
+        self._closure(color, f'microfacet("ggx", {normal.code}, Tn, {a}, {a}, 1.0, 1)')
 
     def diffuse(self, color):
         self._closure(color, "diffuse(N)")

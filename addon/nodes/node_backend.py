@@ -166,6 +166,12 @@ class NodeBackend:
     def log(self, x):
         return self._math("LOGARITHM", self.maximum(x, 1e-30), 2.718281828459045)
 
+    def abs(self, x):
+        return self._math("ABSOLUTE", x)
+
+    def step_below(self, x, edge):
+        return self._math("LESS_THAN", x, edge)
+
     def minimum(self, a, b):
         return self._math("MINIMUM", a, b)
 
@@ -218,6 +224,11 @@ class NodeBackend:
             inputs["Anisotropy"] = 1.0 - self.sqrt(alpha_x / alpha_y)
             inputs["Tangent"] = tangent
         self._closure("ShaderNodeBsdfGlossy", inputs, distribution="GGX")
+
+    def flake_transmission(self, color, alpha, normal):
+        """Refraction BSDF (GGX) with IOR 1: see closures_np.ggx_transmission_eta1."""
+        self._closure("ShaderNodeBsdfRefraction", {"Color": color, "Roughness": self._roughness(alpha),
+                                                   "IOR": 1.0, "Normal": normal}, distribution="GGX")
 
     def diffuse(self, color):
         self._closure("ShaderNodeBsdfDiffuse", {"Color": color})

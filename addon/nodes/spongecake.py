@@ -9,12 +9,16 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
   height-correlated Smith); the (1 − τ²) factor is G of Eq. 12 at Λi = Λo. [approx: mirror-G]
   A tilted flake normal keeps the GGX lobe around it. [approx: tilted-flakes]
 * fiber layers: the same with an anisotropic GGX, exact for in-plane fibers (see ``_fiber_lobe``).
-* hg layers: reflection = Lambert with the single-scattering albedo estimate γ · p_up · ½(1 − τ²).
-  [approx: lambert-lobe]
-* every layer: transmission = Lambert translucency with albedo γ · p_down · x e^{−x}, x = Tρ σ(ωo)/cos θo
-  (Eq. 14 integrated at ωi = −ωo). [approx: translucent-lobe]
-* attenuation by the layers above (below) is ∏ τ_j(ωo)² for reflection, ∏ τ_j(ωo) both ways for
-  transmission (Sec. 4.3 with τ(ωi) ≈ τ(ωo)). [approx: mirror-attenuation]
+* flake transmission: GGX refraction with IOR 1, which Cycles evaluates as D(h) G2 / (4|cos i||cos o|) with
+  h ∝ ωi + ωo — the form of Eq. 13 — weighted by Eq. 14 with the light at normal incidence
+  (``_transmission_g``). Cycles' anisotropic refraction does not follow that form (measured), so fibers
+  transmit through an isotropic lobe with α = sqrt(α_x α_y). [approx: isotropic-fiber-transmission]
+  The flakes' Schlick F is evaluated at h = n in transmission, where |ωi·h| = |ωo·h| = cos θo.
+  [approx: schlick-at-view]
+* hg layers: Lambert reflection and translucency carrying the single-scattering estimates
+  γ · p · ½(1 − τ²) and γ · (1 − p) · G_t, p the backward share of HG scattering. [approx: lambert-hg]
+* attenuation by the layers above is ∏ τ_j(ωo)² for reflection (Sec. 4.3 with τ(ωi) ≈ τ(ωo)), and
+  ∏ τ_j(ωo) · ∏ τ_j(n) for transmission (layers above, layers below). [approx: mirror-attenuation]
 * substrate: its closure × ∏ τ_j(ωo)² (Sec. 4.4). [approx: mirror-attenuation]
 * delta transmission: transparent × ∏ τ_j(ωo) — exact (ωi = −ωo and σ is symmetric).
 
@@ -27,14 +31,7 @@ from dataclasses import dataclass
 
 from ..models import spongecake as model
 from ..models.params import Param
-
-# Share of a layer's single scattering that leaves downwards, for light arriving along the normal
-# (hemispherical split of the phase function; surface flakes: smooth flakes only reflect, α = 1 is isotropic).
-P_DOWN = {
-    "surface": lambda b, a: 0.5 * a * a,
-    "fiber": lambda b, a: 0.5,
-    "hg": lambda b, g: 0.5 * (1.0 + g),
-}
+from .expr import schlick_at_view
 
 
 @dataclass(frozen=True)
@@ -96,15 +93,19 @@ def shade(b, p: model.Params) -> None:
     taus = [t["tau"] for t in terms]
     for k, (layer, t) in enumerate(zip(p.layers, terms)):
         above = _prod(*taus[:k]) if k else None
-        below = _prod(*taus[k + 1:]) if k + 1 < len(taus) else None
+        below = _prod(*[u["tau_n"] for u in terms[k + 1:]]) if k + 1 < len(terms) else None
         reflected = _prod(0.5 * (1.0 - t["tau"] * t["tau"]), above, above)  # Eq. 12 at Λi = Λo, Sec. 4.3
+        transmitted = _prod(_transmission_g(b, t), above, below)
         if layer.is_flake:
-            b.glossy(b.scale(t["albedo"], reflected), t["alpha_x"], t["alpha_y"], t["normal"], t.get("tangent"),
-                     t.get("f0"))
+            lobe = (t["alpha_x"], t["alpha_y"], t["normal"], t.get("tangent"))
+            b.glossy(b.scale(t["albedo"], reflected), *lobe, t.get("f0"))
+            color = b.scale(t["albedo"], transmitted)
+            if "f0" in t:
+                color = schlick_at_view(b, color, t["f0"], t["normal"])
+            b.flake_transmission(color, b.sqrt(t["alpha_x"] * t["alpha_y"]), t["normal"])
         else:
-            b.diffuse(b.scale(t["albedo"], (1.0 - t["p_down"]) * reflected))
-        x = t["x"]
-        b.translucent(b.scale(t["albedo"], _prod(t["p_down"] * x * b.exp(-x), above, below)))  # Eq. 14 at ωi = −ωo
+            b.diffuse(b.scale(t["albedo"], t["p_back"] * reflected))
+            b.translucent(b.scale(t["albedo"], (1.0 - t["p_back"]) * transmitted))
     stack = _prod(*taus)
     if p.substrate is not None:
         _substrate(b, p.substrate, stack * stack)
@@ -112,37 +113,62 @@ def shade(b, p: model.Params) -> None:
         b.transparent(b.scale((1.0, 1.0, 1.0), stack))
 
 
+def _transmission_g(b, t):
+    """Eq. 14's G·(Λi + Λo)/2 with the light at normal incidence on the far side: with a = Tρ|Λ(n)|,
+    x = Tρ|Λ(ωo)|, it is (e^{−x} − e^{−a})(a + x) / (2(a − x)), and a x e^{−x} → x e^{−x} as x → a.
+    The factor (a + x)/2 turns the closure's Smith G2 = 2/(|Λi| + |Λo|) into Eq. 14's.
+    [approx: transmission-normal-light]"""
+    a, x = t["x_n"], t["x"]
+    d = a - x
+    near = b.step_below(b.abs(d), 1e-4)
+    exact = (b.exp(-x) - b.exp(-a)) * (a + x) / (2.0 * (d + near))  # the + near keeps the unused branch finite
+    limit = x * b.exp(-x)
+    return exact * (1.0 - near) + limit * near
+
+
 def _layer_terms(b, k: int, layer: model.Layer, mu) -> dict:
     name = f"L{k + 1} "
     rough = b.input(name + ("Roughness" if layer.is_flake else "Mean Cosine g"), "float")
-    t = {"albedo": b.input(name + "Albedo", "color"), "p_down": P_DOWN[layer.type](b, rough)}
+    t = {"albedo": b.input(name + "Albedo", "color")}
     thickness = b.input(name + "Thickness", "float")
-    sigma = 1.0
+    sigma = sigma_n = 1.0
     if layer.is_flake:
         direction = b.direction(b.input(name + "Orientation", "vector"))
-        c = b.dot_view(direction)
+        c, c_n = b.dot_view(direction), b.dot(direction, b.normal())
         a2 = rough * rough
-        # σ(ωo) = sqrt(ωoᵀ S ωo) for S of Sec. 3.3 rotated to the orientation (research notes §1)
+        # σ(ω) = sqrt(ωᵀ S ω) for S of Sec. 3.3 rotated to the orientation (research notes §1)
         if layer.type == "surface":
-            sigma = b.sqrt(a2 + (1.0 - a2) * c * c)
+            sigma, sigma_n = b.sqrt(a2 + (1.0 - a2) * c * c), b.sqrt(a2 + (1.0 - a2) * c_n * c_n)
             t.update(alpha_x=rough, alpha_y=rough, normal=direction)
         else:
-            sigma = b.sqrt(1.0 + (a2 - 1.0) * c * c)
-            t.update(_fiber_lobe(b, rough, direction))
+            sigma, sigma_n = b.sqrt(1.0 + (a2 - 1.0) * c * c), b.sqrt(1.0 + (a2 - 1.0) * c_n * c_n)
+            t.update(_fiber_lobe(b, rough, c_n, direction))
         if layer.has_fresnel:
             t["f0"] = b.input(name + "F0", "color")
+    else:
+        t["p_back"] = _hg_back_share(b, rough)
     t["x"] = thickness * sigma / mu
+    t["x_n"] = thickness * sigma_n
     t["tau"] = b.exp(-t["x"])
+    t["tau_n"] = b.exp(-t["x_n"])
     return t
 
 
-def _fiber_lobe(b, alpha, tangent) -> dict:
+def _hg_back_share(b, g):
+    """Share of Henyey–Greenstein scattering into the backward hemisphere for light along the normal:
+    (1 − g)/(2g) · ((1 + g)/sqrt(1 + g²) − 1), → 1/2 as g → 0 (the series 1/2 − 3g/4 + … below |g| = 1e-3)."""
+    small = b.step_below(b.abs(g), 1e-3)
+    safe_g = g + small  # keeps the unused branch finite at g = 0
+    exact = (1.0 - g) / (2.0 * safe_g) * ((1.0 + g) / b.sqrt(1.0 + g * g) - 1.0)
+    return exact * (1.0 - small) + (0.5 - 0.75 * g) * small
+
+
+def _fiber_lobe(b, alpha, c_n, tangent) -> dict:
     """Fibers along an in-plane tangent t: S = diag(α², 1, 1) in (t, n×t, n), so D is the anisotropic GGX with
     (α_t, α_b) = (α, 1) and Λ_sggx = 1 + 2Λ_smith — exact, like surface flakes. Tilting t out of the plane
-    blends α_t towards 1 (isotropic GGX α = 1 for fibers along n, whose exact lobe, GGX with α = 1/α > 1,
-    Cycles cannot express). [approx: tilted-fiber]"""
-    c = b.dot(tangent, b.normal())
-    in_plane = 1.0 - c * c
+    (c_n = t·n) blends α_t towards 1 (isotropic GGX α = 1 for fibers along n, whose exact lobe, GGX with
+    α = 1/α > 1, Cycles cannot express). [approx: tilted-fiber]"""
+    in_plane = 1.0 - c_n * c_n
     return {"alpha_x": 1.0 + (alpha - 1.0) * in_plane, "alpha_y": 1.0, "normal": b.normal(),
             "tangent": b.tangent_plane(tangent)}
 
