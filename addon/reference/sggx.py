@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .frames import basis, dot, from_frame, normalize
+from .frames import basis, dot, from_frame, normalize, reflect
 
 
 class SGGX(NamedTuple):
@@ -128,4 +128,4 @@ def sample_vndf(s: SGGX, wi, u1, u2):
 def sample_phase(s: SGGX, wi, u1, u2):
     """Scatter direction of a two-sided mirror flake (wi reflected about a visible normal) and that normal."""
     m = sample_vndf(s, wi, u1, u2)
-    return 2.0 * dot(wi, m)[:, None] * m - wi, m
+    return reflect(wi, m), m

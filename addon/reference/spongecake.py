@@ -126,10 +126,11 @@ def _stack_eval(params: Params, wi, wo):
     att = np.exp(-(_between(_optical_depths(params, wi), _above(wi)) + _between(_optical_depths(params, wo), _above(wo))))
     total = np.zeros((len(wi), 3))
     for k, layer in enumerate(params.layers):
-        g = _slab_g(layer.thickness, _sigma(layer, wi) / ci, _sigma(layer, wo) / co)
-        scale = g * att[k] / np.abs(ci * co)
+        sigma_i = _sigma(layer, wi)
+        g = _slab_g(layer.thickness, sigma_i / ci, _sigma(layer, wo) / co)
         # reduced phase function over rho, sigma(wi) F f_p (Eq. 5), integrated over the depth (Eqs. 10, 11)
-        total += np.asarray(layer.albedo) * _phase_value(layer, wi, wo) * (_sigma(layer, wi) * scale)[:, None]
+        scale = sigma_i * g * att[k] / np.abs(ci * co)
+        total += np.asarray(layer.albedo) * _phase_value(layer, wi, wo) * scale[:, None]
     if params.substrate is not None:
         total *= ((ci > 0) & (co > 0))[:, None]
     return np.where(grazing[:, None], 0.0, total)
@@ -304,7 +305,9 @@ def _exit_depths(params: Params, w):
 
 def _free_flight(params: Params, z, d, rng):
     """Exponential free flight through the piecewise-constant extinction T_k rho_k sigma_k(d) of layers of unit
-    depth (layer k spans depths [k, k + 1]). Returns the new depth, the layer, and whether the path collided."""
+    depth (layer k spans depths [k, k + 1]); the optical depth left at a boundary carries into the next layer
+    (the same law as re-sampling there, by memorylessness). Returns the new depth, the layer, and whether the
+    path collided (else it left through the top or the bottom)."""
     n_layers = len(params.layers)
     up = d[:, 2] > 0
     kappa = np.array([layer.thickness * _sigma(layer, d) for layer in params.layers])
@@ -344,7 +347,7 @@ def _nee(params: Params, state, wo_pairs, kappa_o, slots, sums, chunk=1 << 19):
 
 
 def _vertex_to(params: Params, z, wi, layer, surface, wo, kappa_o):
-    """Radiance towards wo per unit incident power at vertices at depth z (light arriving from wi), (N, 3)."""
+    """Next-event estimate towards wo of vertices at depth z reached with unit throughput from wi, (N, 3)."""
     up = wo[:, 2] > 0
     j = np.arange(len(params.layers))[:, None]
     overlap = np.where(up, np.clip(z - j, 0.0, 1.0), np.clip(j + 1 - z, 0.0, 1.0))
@@ -431,5 +434,6 @@ def ground_truth(params: Params, wi, wo, n_paths: int = 20000, seed: int = 0, ma
         if len(state[0]) == 0:
             break
         _nee(params, state, wo, kappa_o, slots, sums[min(depth, 1)])
-        state = _scatter(params, state, rng)
+        if depth + 1 < max_depth:
+            state = _scatter(params, state, rng)
     return tuple(s / n_paths for s in sums)
