@@ -19,7 +19,7 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
   γ · p · ½(1 − τ²) and γ · (1 − p) · G_t, p the backward share of HG scattering. [approx: lambert-hg]
 * attenuation by the layers above is ∏ τ_j(ωo)² for reflection (Sec. 4.3 with τ(ωi) ≈ τ(ωo)), and
   ∏ τ_j(ωo) · ∏ τ_j(n) for transmission (layers above, layers below). [approx: mirror-attenuation]
-* substrate: its closure × ∏ τ_j(ωo)² (Sec. 4.4). [approx: mirror-attenuation]
+* substrate: its closure × ∏ τ_j(ωo)² (Sec. 4.4). [approx: substrate-attenuation]
 * delta transmission: transparent × ∏ τ_j(ωo) — exact (ωi = −ωo and σ is symmetric).
 
 The node-group form also evaluates Schlick's F at h = flake normal [approx: schlick-at-view];
@@ -32,6 +32,39 @@ from dataclasses import dataclass
 from ..models import spongecake as model
 from ..models.params import Param
 from .expr import schlick_at_view
+
+
+# Every approximation the mapping makes, with a configuration that isolates it (docs/accuracy.md measures
+# each against the reference on the comparison scenes; ``make bench`` regenerates the table).
+def _one(**layer):
+    return {"layers": [{"albedo": [1, 1, 1], **layer}]}
+
+
+APPROXIMATIONS = {
+    "mirror-G": ("Eq. 12's G evaluated at Λi = Λo (thin layers; exact when thick)",
+                 _one(type="surface", roughness=0.3, thickness=0.3)),
+    "tilted-flakes": ("a tilted flake normal keeps an isotropic GGX lobe around it",
+                      _one(type="surface", roughness=0.3, thickness=1e4, orientation=[0.5, 0, 0.866])),
+    "tilted-fiber": ("fibers leaving the tangent plane blend towards an isotropic α = 1 lobe",
+                     _one(type="fiber", roughness=0.3, thickness=1e4, orientation=[0.707, 0, 0.707])),
+    "fiber-along-normal": ("fibers along the normal (sheen) become an isotropic α = 1 lobe",
+                           _one(type="fiber", roughness=0.3, thickness=1e4, orientation=[0, 0, 1])),
+    "transmission-normal-light": ("transmission weight (Eq. 14) with the light at normal incidence",
+                                  _one(type="surface", roughness=0.3, thickness=1.0)),
+    "isotropic-fiber-transmission": ("Cycles refracts isotropically: fiber transmission uses α = sqrt(α_t α_b)",
+                                     _one(type="fiber", roughness=0.1, thickness=1.0, orientation=[1, 0, 0])),
+    "lambert-hg": ("HG layers as Lambert reflection and translucency with single-scattering albedo estimates",
+                   _one(type="hg", roughness=0.7, thickness=1.0)),
+    "mirror-attenuation": ("attenuation by other layers along ωi taken equal to that along ωo (reflection)",
+                           {"layers": [{"type": "surface", "roughness": 0.3, "thickness": 0.3, "albedo": [1, 1, 1]},
+                                       {"type": "surface", "roughness": 0.6, "thickness": 1e4,
+                                        "albedo": [1, 1, 1]}]}),
+    "substrate-attenuation": ("the substrate is attenuated by ∏ τ(ωo)² instead of ∏ τ(ωi) τ(ωo)",
+                              {**_one(type="surface", roughness=0.05, thickness=0.2),
+                               "substrate": {"type": "diffuse", "albedo": [0.8, 0.8, 0.8]}}),
+    "schlick-at-view": ("node group only: Schlick F at h = flake normal instead of per microfacet",
+                        _one(type="surface", roughness=0.3, thickness=1e4, f0=[0.2, 0.2, 0.2])),
+}
 
 
 @dataclass(frozen=True)
@@ -167,7 +200,7 @@ def _fiber_lobe(b, alpha, c_n, tangent) -> dict:
     """Fibers along an in-plane tangent t: S = diag(α², 1, 1) in (t, n×t, n), so D is the anisotropic GGX with
     (α_t, α_b) = (α, 1) and Λ_sggx = 1 + 2Λ_smith — exact, like surface flakes. Tilting t out of the plane
     (c_n = t·n) blends α_t towards 1 (isotropic GGX α = 1 for fibers along n, whose exact lobe, GGX with
-    α = 1/α > 1, Cycles cannot express). [approx: tilted-fiber]"""
+    α = 1/α > 1, Cycles cannot express). [approx: tilted-fiber] [approx: fiber-along-normal]"""
     in_plane = 1.0 - c_n * c_n
     return {"alpha_x": 1.0 + (alpha - 1.0) * in_plane, "alpha_y": 1.0, "normal": b.normal(),
             "tangent": b.tangent_plane(tangent)}

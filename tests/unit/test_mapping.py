@@ -93,3 +93,14 @@ def test_thick_flake_layers_map_exactly_onto_ggx_lobes(layer):
     wi, wo = _dirs(2000, 11), _dirs(2000, 12)
     f, _ = _predict(p, wi, wo)
     np.testing.assert_allclose(f, reference.eval(p, wi, wo), rtol=1e-9, atol=1e-300)
+
+
+def test_every_named_approximation_is_declared_and_every_declared_one_is_used():
+    import pathlib
+    import re
+
+    source = "".join(p.read_text() for p in pathlib.Path(mapping.__file__).parent.glob("*.py"))
+    tags = set(re.findall(r"\[approx: ([\w-]+)\]", source))
+    assert tags == set(mapping.APPROXIMATIONS)
+    for _, config in mapping.APPROXIMATIONS.values():
+        assert model.validate(config).warnings == []
