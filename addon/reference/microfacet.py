@@ -41,11 +41,13 @@ def vndf_pdf(wi, m, alpha):
 
 
 def sample_vndf(wi, alpha, u1, u2):
-    """Visible normal of GGX for wi above the horizon (Heitz 2018, 'Sampling the GGX distribution of visible normals')."""
+    """Visible normal of GGX for wi above the horizon (Heitz 2018, 'Sampling the GGX distribution of visible
+    normals')."""
     v = normalize(wi * np.array([alpha, alpha, 1.0]))
     len2 = v[:, 0] ** 2 + v[:, 1] ** 2
     inv = np.divide(1.0, np.sqrt(len2), out=np.zeros_like(len2), where=len2 > 0)
-    t1 = np.where((len2 > 0)[:, None], np.stack([-v[:, 1] * inv, v[:, 0] * inv, np.zeros_like(inv)], axis=1), [1.0, 0.0, 0.0])
+    t1 = np.stack([-v[:, 1] * inv, v[:, 0] * inv, np.zeros_like(inv)], axis=1)
+    t1 = np.where((len2 > 0)[:, None], t1, [1.0, 0.0, 0.0])
     t2 = np.cross(v, t1)
     r, phi = np.sqrt(u1), 2.0 * np.pi * u2
     p1, p2 = r * np.cos(phi), r * np.sin(phi)

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..models.spongecake import Layer, Params, Substrate, params_from_dict
 from . import hg, microfacet, sggx
-from .frames import as_directions, dot, normalize, spherical
+from .frames import as_directions, dot, spherical
 
 __all__ = ["Params", "Sample", "params_from_dict", "eval", "pdf", "sample", "delta_transmittance",
            "directional_albedo", "ground_truth"]
@@ -123,7 +123,8 @@ def _stack_eval(params: Params, wi, wo):
     ci, co = wi[:, 2], wo[:, 2]
     grazing = (ci == 0) | (co == 0)
     ci, co = np.where(grazing, 1.0, ci), np.where(grazing, 1.0, co)
-    att = np.exp(-(_between(_optical_depths(params, wi), _above(wi)) + _between(_optical_depths(params, wo), _above(wo))))
+    between = _between(_optical_depths(params, wi), _above(wi)) + _between(_optical_depths(params, wo), _above(wo))
+    att = np.exp(-between)
     total = np.zeros((len(wi), 3))
     for k, layer in enumerate(params.layers):
         sigma_i = _sigma(layer, wi)

@@ -10,8 +10,8 @@ COSINES = (1.0, 1e-7, 0.0, -0.0, -1e-7, -1.0)
 DIRECTIONS = frames.spherical(np.repeat(COSINES, 2), np.tile([0.0, 2.2], len(COSINES)))
 U = np.array(list(itertools.product((0.0, 0.5, np.nextafter(1.0, 0.0)), repeat=3)))
 
-FLAKES = [dict(type=t, roughness=a, f0=f0, orientation=o)
-          for t in ("surface", "fiber") for a in (1e-4, 1.0) for f0 in ([0, 0, 0], [1, 1, 1]) for o in ([0, 0, 1], [1, 0, 0])]
+FLAKES = [dict(type=t, roughness=a, f0=f0, orientation=o) for t, a, f0, o in itertools.product(
+    ("surface", "fiber"), (1e-4, 1.0), ([0, 0, 0], [1, 1, 1]), ([0, 0, 1], [1, 0, 0]))]
 LAYERS = FLAKES + [dict(type="hg", roughness=g) for g in (-0.99, 0.99)]
 STACKS = {
     "alone": {},

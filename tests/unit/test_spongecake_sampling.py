@@ -9,15 +9,18 @@ from stats import cell_integrals, chi2_test, unit
 
 N = 200_000
 CASES = {
-    "surface tilted": dict(layers=[dict(type="surface", roughness=0.3, f0=[0.04, 0.5, 1.0], orientation=[0.4, 0.2, 0.9])]),
+    "surface tilted": dict(layers=[dict(type="surface", roughness=0.3, f0=[0.04, 0.5, 1.0],
+                                        orientation=[0.4, 0.2, 0.9])]),
     "fiber tilted": dict(layers=[dict(type="fiber", roughness=0.4, thickness=1.5, orientation=[0.6, 0.3, 0.74])]),
     "hg with delta": dict(layers=[dict(type="hg", roughness=0.6, thickness=0.8)], delta_transmission=True),
     "2 layers": dict(layers=[dict(type="fiber", roughness=0.5, thickness=0.7, orientation=[1, 0, 0]),
                              dict(type="surface", roughness=0.4, thickness=2.0)]),
-    "3 layers with delta": dict(layers=[dict(type="surface", roughness=0.35, thickness=0.3), dict(type="hg", roughness=-0.4),
+    "3 layers with delta": dict(layers=[dict(type="surface", roughness=0.35, thickness=0.3),
+                                        dict(type="hg", roughness=-0.4),
                                         dict(type="fiber", roughness=0.6, orientation=[0, 0.6, 0.8])],
                                 delta_transmission=True),
-    "diffuse substrate": dict(layers=[dict(type="surface", roughness=0.3, thickness=0.4)], substrate=dict(type="diffuse")),
+    "diffuse substrate": dict(layers=[dict(type="surface", roughness=0.3, thickness=0.4)],
+                              substrate=dict(type="diffuse")),
     "conductor substrate": dict(layers=[dict(type="fiber", roughness=0.5, thickness=0.3)],
                                 substrate=dict(type="conductor", roughness=0.4)),
     "dielectric substrate": dict(layers=[dict(type="hg", roughness=0.3, thickness=0.3)],
@@ -84,7 +87,8 @@ def test_chi2_catches_the_half_vector_jacobian_bug():
 
     def scaled(power):
         def pdf(wo):
-            jacobian = 4 * np.abs(frames.dot(np.repeat(wi, len(wo), 0), sggx.half_vector(np.repeat(wi, len(wo), 0), wo)[0]))
+            wis = np.repeat(wi, len(wo), 0)
+            jacobian = 4 * np.abs(frames.dot(wis, sggx.half_vector(wis, wo)[0]))
             return right(wo) * jacobian ** power
         total = cell_integrals(pdf, 24, 48, 10).sum()
         return lambda wo: pdf(wo) / total
