@@ -240,11 +240,20 @@ class NodeBackend:
         self._closure("ShaderNodeBsdfTransparent", {"Color": color})
 
     def conductor(self, color, alpha, eta, k):
-        if hasattr(bpy.types, "ShaderNodeBsdfMetallic"):  # Blender 4.3+
-            self._closure("ShaderNodeBsdfMetallic", {"Base Color": color, "Roughness": self._roughness(alpha),
-                                                     "IOR": eta, "Extinction": k},
-                          distribution="GGX", fresnel_type="PHYSICAL_CONDUCTOR")
-        else:  # 4.2: Principled metal with the normal-incidence reflectance of the complex IOR
+        """Metallic BSDF with the physical conductor Fresnel (4.3+), whose colour inputs are then unused: the
+        (grey) weight goes through a Mix Shader. 4.2 has no such node: a Principled metal with the complex
+        IOR's normal-incidence reflectance as F0 (F82 model). [approx: conductor-f0-blender-4.2]"""
+        if hasattr(bpy.types, "ShaderNodeBsdfMetallic"):
+            depth = _depth(color, alpha, eta, k) + 1
+            metal = self._node("ShaderNodeBsdfMetallic", depth, distribution="GGX", fresnel_type="PHYSICAL_CONDUCTOR")
+            for name, value in {"Roughness": self._roughness(alpha), "IOR": eta, "Extinction": k}.items():
+                self._link_or_set(value, metal.inputs[name])
+            mix = self._node("ShaderNodeMixShader", depth + 1)
+            gray = self._vector("DOT_PRODUCT", color, (1.0 / 3.0,) * 3, out="Value")
+            self._link_or_set(gray, mix.inputs["Fac"])
+            self.links.new(metal.outputs[0], mix.inputs[2])
+            self._add(mix.outputs[0], depth + 1)
+        else:
             f0 = ((eta - 1.0) * (eta - 1.0) + k * k) / ((eta + 1.0) * (eta + 1.0) + k * k)
             self._closure("ShaderNodeBsdfPrincipled", {"Base Color": f0 * color, "Metallic": 1.0,
                                                        "Roughness": self._roughness(alpha)}, distribution="GGX")

@@ -62,6 +62,10 @@ APPROXIMATIONS = {
     "substrate-attenuation": ("the substrate is attenuated by ∏ τ(ωo)² instead of ∏ τ(ωi) τ(ωo)",
                               {**_one(type="surface", roughness=0.05, thickness=0.2),
                                "substrate": {"type": "diffuse", "albedo": [0.8, 0.8, 0.8]}}),
+    "conductor-f0-blender-4.2": ("Blender 4.2 node group only (no Metallic BSDF node): Principled metal with the "
+                                "complex IOR's F0; not measured here (bpy 5.0)",
+                                {**_one(type="surface", roughness=0.3, thickness=0.1),
+                                 "substrate": {"type": "conductor"}}),
     "schlick-at-view": ("node group only: Schlick F at h = flake normal instead of per microfacet",
                         _one(type="surface", roughness=0.3, thickness=1e4, f0=[0.2, 0.2, 0.2])),
 }

@@ -1,0 +1,121 @@
+"""Cycles renders what the mapping predicts (both forms, every preset), matches the reference where the mapping
+is exact, stays finite at the extremes, and a saved .blend renders the same without Lamina."""
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from addon import presets  # noqa: E402
+from addon.models import spongecake as model  # noqa: E402
+from addon.nodes import material, predicted_eval  # noqa: E402
+from addon.operators import blend_io  # noqa: E402
+from addon.operators.cycles_render import render_cycles  # noqa: E402
+from addon.reference import metrics  # noqa: E402
+from addon.reference import scenes as S  # noqa: E402
+from addon.reference import spongecake as reference  # noqa: E402
+
+pytestmark = pytest.mark.blender
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+SCENES = [S.sphere_scene(resolution=40), S.plane_scene(resolution=(40, 20)), S.backlit_scene(resolution=(40, 20))]
+
+
+@pytest.fixture(autouse=True)
+def clean_file():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    yield
+
+
+def _render(p, form, spec, samples, tmp_path):
+    mat = material.new_material(model.ID, p, form)
+    img, _ = render_cycles(mat, spec, samples, 0, str(tmp_path / f"{spec.name}.exr"))
+    return img
+
+
+@pytest.mark.parametrize("name", presets.names(model.ID))
+@pytest.mark.parametrize("form", ["nodes", "osl"])
+def test_cycles_renders_the_predicted_mapping(name, form, tmp_path):
+    """The generated node group / OSL computes exactly the mapping's closures and weights (up to noise)."""
+    p = model.params_from_dict(presets.load(model.ID, name))
+    for spec in SCENES:
+        img = _render(p, form, spec, 32, tmp_path)
+        predicted = S.reference_image(spec, predicted_eval(model.ID, p, form))
+        mask = S.scene_mask(spec)
+        err = metrics.rmse(img, predicted, mask) / max(predicted[mask].mean(), 1e-3)
+        assert err < 0.02, f"{name} {form} {spec.name}: {err:.4f}"
+
+
+@pytest.mark.parametrize("form", ["nodes", "osl"])
+def test_thick_surface_layer_renders_like_the_reference(form, tmp_path):
+    """The calibration case: the mapping is exact, so Cycles must match the reference to noise (≤ 3%)."""
+    p = model.params_from_dict(presets.load(model.ID, "thick_flakes"))
+    for spec in SCENES[:2] + [S.furnace_scene(resolution=(32, 16))]:
+        img = _render(p, form, spec, 64, tmp_path)
+        ref = S.reference_image(spec, lambda wi, wo: reference.eval(p, wi, wo),
+                                bsdf_albedo=lambda wo: reference.directional_albedo(p, wo, n=4096))
+        assert metrics.rel_rmse(img, ref, S.scene_mask(spec)) < 0.03, spec.name
+
+
+EXTREMES = [
+    {"layers": [{"type": "surface", "roughness": 1e-4, "thickness": 1e3, "f0": [0, 0, 0]}]},
+    {"layers": [{"type": "surface", "roughness": 1.0, "thickness": 1e-6}], "delta_transmission": True},
+    {"layers": [{"type": "fiber", "roughness": 1e-4, "thickness": 1e3, "orientation": [1, 0, 0]},
+                {"type": "fiber", "roughness": 1e-4, "thickness": 1e-6, "orientation": [0, 0, 1]}]},
+    {"layers": [{"type": "hg", "roughness": 0.99, "thickness": 1e3}, {"type": "hg", "roughness": -0.99,
+                                                                        "thickness": 1e-6}],
+     "substrate": {"type": "conductor", "roughness": 1e-4}},
+    {"layers": [{"type": "surface", "roughness": 1e-4, "thickness": 1e-6, "f0": [1, 0, 0]},
+                {"type": "hg", "roughness": 0.0, "thickness": 1e4}], "substrate": {"type": "dielectric"}},
+]
+
+
+@pytest.mark.parametrize("config", EXTREMES, ids=range(len(EXTREMES)))
+@pytest.mark.parametrize("form", ["nodes", "osl"])
+def test_extreme_parameters_render_finite_non_negative_pixels(config, form, tmp_path):
+    p = model.params_from_dict(config)
+    for spec in SCENES + [S.furnace_scene(resolution=(24, 12))]:
+        img = _render(p, form, spec.with_resolution(24, 24 if spec.kind == "sphere" else 12), 8, tmp_path)
+        assert np.all(np.isfinite(img)) and np.all(img >= 0), spec.name
+
+
+@pytest.mark.parametrize("form", ["nodes", "osl"])
+def test_saved_blend_renders_the_same_without_lamina(form, tmp_path):
+    """Rendered here (Lamina loaded) and in a fresh process where Lamina cannot even be imported."""
+    blend = tmp_path / "m.blend"
+    p = model.params_from_dict(presets.load(model.ID, "leaf"))
+    blend_io.write_material_blend(model.ID, p, form, "leaf", str(blend))
+    render = textwrap.dedent("""
+        def render(blend, out):
+            import bpy
+            bpy.ops.wm.open_mainfile(filepath=blend)
+            scene = bpy.data.scenes["Lamina leaf"]
+            scene.render.resolution_x = scene.render.resolution_y = 32
+            scene.cycles.samples = 16
+            scene.render.image_settings.file_format = "OPEN_EXR"
+            scene.render.filepath = out
+            bpy.ops.render.render(write_still=True, scene=scene.name)
+    """)
+    namespace = {}
+    exec(render, namespace)
+    here = tmp_path / "here.exr"
+    namespace["render"](str(blend), str(here))
+    render += textwrap.dedent("""
+        import sys
+        render(sys.argv[1], sys.argv[2])
+        print("LAMINA_MODULES", [m for m in sys.modules if m == "addon" or m.startswith("addon.") or "lamina" in m])
+    """)
+    fresh = tmp_path / "fresh.exr"
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    r = subprocess.run([sys.executable, "-c", render, str(blend), str(fresh)], capture_output=True, text=True,
+                       cwd=str(tmp_path), timeout=300, env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "LAMINA_MODULES []" in r.stdout
+    from addon.bake.exr import read_exr
+
+    a, b = read_exr(here, "RGB"), read_exr(fresh, "RGB")
+    assert a.mean() > 1e-3
+    np.testing.assert_array_equal(a, b)
