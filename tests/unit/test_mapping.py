@@ -100,7 +100,7 @@ def test_every_named_approximation_is_declared_and_every_declared_one_is_used():
     import re
 
     source = "".join(p.read_text() for p in pathlib.Path(mapping.__file__).parent.glob("*.py"))
-    tags = set(re.findall(r"[approx: ([\w.-]+)\]", source))
+    tags = set(re.findall(r"\[approx: ([\w.-]+)\]", source))
     assert tags == set(mapping.APPROXIMATIONS)
     for _, config in mapping.APPROXIMATIONS.values():
         assert model.validate(config).warnings == []
