@@ -29,36 +29,41 @@ def _midpoint_sphere(n_theta, n_phi):
     return frames.spherical(c.ravel(), phi.ravel())
 
 
-def _pairs(transmission=False):
-    g = _grid()
-    return np.repeat(g, len(g), axis=0), np.tile(_grid(-1.0 if transmission else 1.0), (len(g), 1))
+def _pairs(wi_side, wo_side):
+    """All 16 x 16 pairs of the grid, wi and wo on the given sides (+1 above, -1 below)."""
+    wi, wo = _grid(wi_side), _grid(wo_side)
+    return np.repeat(wi, len(wi), axis=0), np.tile(wo, (len(wo), 1))
 
 
+REFLECTION, TRANSMISSION, FROM_BELOW, BELOW_TO_ABOVE = (1, 1), (1, -1), (-1, -1), (-1, 1)
+THREE_LAYERS = [dict(type="surface", roughness=0.3, thickness=0.3), dict(type="hg", roughness=-0.3, thickness=0.5),
+                dict(type="fiber", roughness=0.6, orientation=[0, 0.6, 0.8])]
+FLAKES_OVER_GLASS = dict(layers=[dict(type="surface", roughness=0.3, thickness=0.4)],
+                         substrate=dict(type="dielectric", roughness=0.3, ior=1.5))
 GROUND_TRUTH_CASES = {
-    "surface tilted, Fresnel": (dict(layers=[dict(type="surface", roughness=0.4, albedo=[0.9, 0.6, 0.3], thickness=1.0,
-                                                  f0=[0.5, 0.2, 1.0], orientation=[0.2, 0.1, 0.97])]), False),
-    "fiber": (dict(layers=[dict(type="fiber", roughness=0.3, albedo=[0.8, 0.8, 0.8], thickness=2.0,
-                                orientation=[1, 0, 0])]), False),
-    "hg transmission": (dict(layers=[dict(type="hg", roughness=0.5, albedo=[0.9, 0.9, 0.9], thickness=0.7)]), True),
+    "surface tilted, Fresnel": (dict(layers=[dict(type="surface", roughness=0.4, albedo=[0.9, 0.6, 0.3],
+                                                  f0=[0.5, 0.2, 1], orientation=[0.2, 0.1, 0.97])]), REFLECTION),
+    "fiber": (dict(layers=[dict(type="fiber", roughness=0.3, thickness=2.0, orientation=[1, 0, 0])]), REFLECTION),
+    "hg transmission": (dict(layers=[dict(type="hg", roughness=0.5, albedo=[0.9, 0.9, 0.9], thickness=0.7)]),
+                        TRANSMISSION),
     "2 layers transmission": (dict(layers=[dict(type="fiber", roughness=0.5, orientation=[0.6, 0.8, 0]),
-                                           dict(type="surface", roughness=0.5, thickness=0.5)]), True),
-    "3 layers": (dict(layers=[dict(type="surface", roughness=0.3, thickness=0.3),
-                              dict(type="hg", roughness=-0.3, thickness=0.5),
-                              dict(type="fiber", roughness=0.6, thickness=1.0, orientation=[0, 0.6, 0.8])]), False),
+                                           dict(type="surface", roughness=0.5, thickness=0.5)]), TRANSMISSION),
+    "3 layers": (dict(layers=THREE_LAYERS), REFLECTION),
+    "3 layers from below": (dict(layers=THREE_LAYERS), FROM_BELOW),
     "diffuse substrate": (dict(layers=[dict(type="surface", roughness=0.3, thickness=0.4)],
-                               substrate=dict(type="diffuse", albedo=[0.6, 0.3, 0.1])), False),
-    "dielectric substrate transmission": (dict(layers=[dict(type="surface", roughness=0.3, thickness=0.4)],
-                                               substrate=dict(type="dielectric", roughness=0.3, ior=1.5)), True),
+                               substrate=dict(type="diffuse", albedo=[0.6, 0.3, 0.1])), REFLECTION),
     "conductor substrate": (dict(layers=[dict(type="fiber", roughness=0.5, thickness=0.4)],
-                                 substrate=dict(type="conductor", roughness=0.3)), False),
+                                 substrate=dict(type="conductor", roughness=0.3)), REFLECTION),
+    "dielectric substrate transmission": (FLAKES_OVER_GLASS, TRANSMISSION),
+    "dielectric substrate from inside": (FLAKES_OVER_GLASS, BELOW_TO_ABOVE),
 }
 
 
 @pytest.mark.parametrize("name", GROUND_TRUTH_CASES)
 def test_single_scattering_matches_the_random_walk(name):
-    stack, transmission = GROUND_TRUTH_CASES[name]
+    stack, sides = GROUND_TRUTH_CASES[name]
     p = _params(**stack)
-    wi, wo = _pairs(transmission)
+    wi, wo = _pairs(*sides)
     reference = spongecake.eval(p, wi, wo)
     walk, _ = spongecake.ground_truth(p, wi, wo, n_paths=20000, seed=1, max_depth=1)
     error = np.abs(reference - walk).mean(axis=0) / walk.mean(axis=0)
