@@ -31,20 +31,23 @@ class LAMINA_OT_compare(bpy.types.Operator):
     def poll(cls, context):
         return lamina_material.is_lamina(getattr(context, "material", None))
 
-    def invoke(self, context, event):
+    def _start(self, context):
         settings = context.window_manager.lamina_compare
         self._mat = context.material
         self._scenes = list(compare_run.SCENES) if settings.scene == "ALL" else [settings.scene]
         self._done = []
         self._out = tempfile.mkdtemp(prefix="lamina_compare_")
+        context.window_manager.progress_begin(0, len(self._scenes))
+
+    def invoke(self, context, event):
+        self._start(context)
         wm = context.window_manager
-        wm.progress_begin(0, len(self._scenes))
         self._timer = wm.event_timer_add(0.05, window=context.window)
         wm.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 
-    def execute(self, context):  # scripted use: run every step at once
-        self.invoke(context, None)
+    def execute(self, context):  # scripted and headless use: every step at once
+        self._start(context)
         while self._step(context):
             pass
         return self._finish(context)
@@ -65,7 +68,8 @@ class LAMINA_OT_compare(bpy.types.Operator):
         if len(self._done) == len(self._scenes):
             return False
         scene = self._scenes[len(self._done)]
-        context.workspace.status_text_set(f"Lamina: comparing {self._mat.name} ({scene})…")
+        if context.workspace is not None:
+            context.workspace.status_text_set(f"Lamina: comparing {self._mat.name} ({scene})…")
         settings = context.window_manager.lamina_compare
         self._done.append(compare_run.compare_material(self._mat, [scene], settings.samples, settings.resolution,
                                                        0, self._out))
@@ -74,7 +78,7 @@ class LAMINA_OT_compare(bpy.types.Operator):
 
     def _finish(self, context):
         self._cleanup(context)
-        report = {k: v for part in self._done for k, v in part.items()}
+        report = {scene: entry for part in self._done for scene, entry in part.items()}
         lines = compare_run.scene_lines(report)
         context.window_manager.lamina_compare.last_report = "\n".join(lines)
         image = compare_run.show_side_by_side(context, report, self._out)
@@ -89,6 +93,7 @@ class LAMINA_OT_compare(bpy.types.Operator):
             wm.event_timer_remove(self._timer)
             self._timer = None
         wm.progress_end()
-        context.workspace.status_text_set(None)
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
 
 

@@ -11,8 +11,10 @@ import importlib
 import json
 import os
 
+import numpy as np
+
 from .. import presets
-from ..bake.exr import atomic_path, read_exr
+from ..bake.exr import atomic_path, read_exr, read_png, write_png
 from ..models import MODELS
 from ..nodes import material as lamina_material
 from ..nodes import predicted_eval
@@ -141,7 +143,18 @@ def demo(forms, scenes, samples: int, resolution: int, seed: int, out_dir: str, 
         print(summary_lines(report), flush=True)
         reports.append(report)
     write_text_atomic(os.path.join(out_dir, "index.html"), index_html(reports, model_id))
+    write_png(os.path.join(out_dir, "overview.png"), overview(reports, out_dir))
     return reports
+
+
+def overview(reports, out_dir: str, form: str = "osl", scene: str = "sphere") -> np.ndarray:
+    """The side-by-side pictures of one scene for every preset, stacked top to bottom in preset order."""
+    rows = [read_png(os.path.join(out_dir, r["label"], r["forms"][form][scene]["files"]["side_by_side"]))
+            for r in reports if form in r["forms"] and scene in r["forms"][form]]
+    width = max(r.shape[1] for r in rows)
+    gap = np.zeros((4, width, 3), dtype=np.uint8)
+    padded = [np.pad(r[..., :3], ((0, 0), (0, width - r.shape[1]), (0, 0))) for r in rows]
+    return np.concatenate([x for r in padded for x in (r, gap)][:-1], axis=0)
 
 
 def index_html(reports, model_id: str) -> str:
