@@ -7,13 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-
-def _dot(a, b):
-    return np.einsum("ij,ij->i", a, b)
-
-
-def _normalize(v):
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)
+from ..reference import microfacet
+from ..reference.frames import dot as _dot
+from ..reference.frames import normalize as _normalize
 
 
 def ggx_d(h_local, alpha_x, alpha_y):
@@ -27,11 +23,6 @@ def ggx_lambda(v_local, alpha_x, alpha_y):
     z2 = np.maximum(v_local[:, 2] ** 2, 1e-300)
     a2 = (alpha_x * v_local[:, 0]) ** 2 + (alpha_y * v_local[:, 1]) ** 2
     return 0.5 * (np.sqrt(1.0 + a2 / z2) - 1.0)
-
-
-def schlick(f0, cos_h):
-    c = np.clip(1.0 - cos_h, 0.0, 1.0)[:, None]
-    return f0 + (1.0 - f0) * c**5
 
 
 def _frame(normal, tangent, n):
@@ -60,7 +51,7 @@ def ggx_reflection(wi, wo, alpha_x, alpha_y=None, normal=(0.0, 0.0, 1.0), tangen
         f = np.where(ok, ggx_d(h, ax, ay) * g2 / (4.0 * np.abs(li[:, 2]) * np.abs(lo[:, 2])), 0.0)
     f = np.repeat(f[:, None], 3, axis=1)
     if f0 is not None:
-        f = f * schlick(np.broadcast_to(f0, wi.shape), np.abs(_dot(li, h)))
+        f = f * microfacet.schlick(f0, _dot(li, h))
     return f
 
 
@@ -99,35 +90,13 @@ def transparent(wi, wo):
     return np.zeros((len(wi), 3))
 
 
-def conductor_fresnel(cos_i, eta, k):
-    """Exact unpolarised Fresnel reflectance of a conductor with complex IOR eta + i k."""
-    c = np.clip(cos_i, 0.0, 1.0)[:, None]
-    n = np.asarray(eta, dtype=complex) + 1j * np.asarray(k, dtype=float)
-    s2 = 1.0 - c * c
-    ct = np.sqrt(1.0 - s2 / (n * n))
-    rs = (c - n * ct) / (c + n * ct)
-    rp = (n * c - ct) / (n * c + ct)
-    return 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
-
-
 def conductor(wi, wo, alpha, eta, k):
-    h = _normalize(wi + wo)
-    return ggx_reflection(wi, wo, alpha) * conductor_fresnel(np.abs(_dot(wi, h)), eta, k)
-
-
-def dielectric_fresnel(cos_i, eta):
-    c = np.clip(cos_i, 0.0, 1.0)
-    s2t = (1.0 - c * c) / (eta * eta)
-    ct = np.sqrt(np.clip(1.0 - s2t, 0.0, 1.0))
-    rs = (c - eta * ct) / (c + eta * ct)
-    rp = (eta * c - ct) / (eta * c + ct)
-    return np.where(s2t >= 1.0, 1.0, 0.5 * (rs * rs + rp * rp))
+    return microfacet.conductor_eval(wi, wo, alpha, eta, k)
 
 
 def dielectric(wi, wo, alpha, ior):
-    """The reflection part of a rough dielectric (the comparison scenes light the outside only)."""
-    h = _normalize(wi + wo)
-    return ggx_reflection(wi, wo, alpha) * dielectric_fresnel(np.abs(_dot(wi, h)), ior)[:, None]
+    """Cycles' rough glass (Glass BSDF / dielectric_bsdf): Walter et al.'s GGX dielectric."""
+    return np.repeat(microfacet.dielectric_eval(wi, wo, alpha, ior)[:, None], 3, axis=1)
 
 
 EVAL = {
