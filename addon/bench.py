@@ -16,7 +16,7 @@ import numpy as np
 
 from . import presets
 from .models import spongecake as model
-from .nodes import predicted_eval
+from .nodes import predicted_image
 from .nodes import spongecake as mapping
 from .reference import metrics
 from .reference import scenes as ref_scenes
@@ -40,12 +40,11 @@ def mapping_errors(p, resolution: int) -> dict:
     out = {"osl": {}, "nodes": {}, "mean": {}}
     for spec in _scenes(resolution):
         ref = ref_scenes.reference_image(spec, lambda wi, wo: reference.eval(p, wi, wo),
-                                         bsdf_albedo=lambda wo: reference.directional_albedo(p, wo, n=ALBEDO_SAMPLES))
+                                         bsdf_albedo=lambda wo: reference.furnace_albedo(p, wo, n=ALBEDO_SAMPLES))
         mask = ref_scenes.scene_mask(spec)
         out["mean"][spec.name] = float(ref[mask].mean())
         for form in ("osl", "nodes"):
-            approx = ref_scenes.reference_image(spec, predicted_eval(MODEL, p, form))
-            out[form][spec.name] = metrics.rel_rmse(approx, ref, mask)
+            out[form][spec.name] = metrics.rel_rmse(predicted_image(MODEL, p, form, spec), ref, mask)
     return out
 
 

@@ -5,16 +5,30 @@ from . import spongecake
 MAPPINGS = {"spongecake": spongecake}
 
 
-def predicted_eval(model_id: str, p, form: str):
-    """``f(wi, wo)`` of what Cycles renders for ``p`` in ``form``, computed in numpy from the same mapping."""
+def _backend(model_id: str, p, form: str, wo):
     from .expr import NumpyBackend
 
-    mapping = MAPPINGS[model_id]
-    values = mapping.input_values(p)
+    b = NumpyBackend(wo, MAPPINGS[model_id].input_values(p), form)
+    MAPPINGS[model_id].shade(b, p)
+    return b
 
-    def evaluate(wi, wo):
-        b = NumpyBackend(wo, values, form)
-        mapping.shade(b, p)
-        return b.evaluate(wi)
 
-    return evaluate
+def predicted_eval(model_id: str, p, form: str):
+    """``f(wi, wo)`` of what Cycles renders for ``p`` in ``form``, computed in numpy from the same mapping."""
+    return lambda wi, wo: _backend(model_id, p, form, wo).evaluate(wi)
+
+
+def predicted_furnace(model_id: str, p, form: str):
+    """``a(wo)``: what a white furnace shows through the form, directional albedo plus transparency."""
+    from ..reference.scenes import directional_albedo
+
+    evaluate = predicted_eval(model_id, p, form)
+    return lambda wo: directional_albedo(evaluate, wo) + _backend(model_id, p, form, wo).transparency()
+
+
+def predicted_image(model_id: str, p, form: str, scene):
+    """A comparison scene as the form renders it (no sampling noise)."""
+    from ..reference.scenes import reference_image
+
+    return reference_image(scene, predicted_eval(model_id, p, form),
+                           bsdf_albedo=predicted_furnace(model_id, p, form))

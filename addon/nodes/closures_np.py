@@ -55,27 +55,6 @@ def ggx_reflection(wi, wo, alpha_x, alpha_y=None, normal=(0.0, 0.0, 1.0), tangen
     return f
 
 
-def ggx_transmission_eta1(wi, wo, alpha, normal=(0.0, 0.0, 1.0)):
-    """Cycles' isotropic GGX refraction with eta = 1 (verified against renders): D(h) G2 / (4 |cos i| |cos o|)
-    with h = normalize(wi + wo) turned to the normal's side — the form of a flake layer's transmission (Eq. 13).
-    (Cycles' anisotropic refraction does not follow this form.)"""
-    n = len(wi)
-    ax = ay = np.broadcast_to(np.asarray(alpha, dtype=float), (n,))
-    t, b, nz = _frame(normal, (1.0, 0.0, 0.0), n)
-
-    def local(v):
-        return np.stack([_dot(v, t), _dot(v, b), _dot(v, nz)], axis=1)
-
-    li, lo = local(wi), local(wo)
-    ok = (li[:, 2] * lo[:, 2] < 0) & (wi[:, 2] * wo[:, 2] < 0)
-    h = _normalize(li + lo)
-    h = h * np.where(h[:, 2:] < 0, -1.0, 1.0)
-    g2 = 1.0 / (1.0 + ggx_lambda(li, ax, ay) + ggx_lambda(lo, ax, ay))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        f = np.where(ok, ggx_d(h, ax, ay) * g2 / (4.0 * np.abs(li[:, 2] * lo[:, 2])), 0.0)
-    return np.repeat(f[:, None], 3, axis=1)
-
-
 def diffuse(wi, wo):
     same = (wi[:, 2] > 0) & (wo[:, 2] > 0)
     return np.repeat(np.where(same, 1.0 / np.pi, 0.0)[:, None], 3, axis=1)
@@ -101,7 +80,6 @@ def dielectric(wi, wo, alpha, ior):
 
 EVAL = {
     "ggx": ggx_reflection,
-    "ggx_transmission": ggx_transmission_eta1,
     "diffuse": diffuse,
     "translucent": translucent,
     "transparent": transparent,

@@ -98,9 +98,6 @@ class NumpyBackend:
             tangent = self.tangent_plane(np.broadcast_to([1.0, 0.0, 0.0], (self.n, 3)))
         self._add("ggx", color, alpha_x=alpha_x, alpha_y=alpha_y, normal=normal, tangent=tangent, f0=f0)
 
-    def flake_transmission(self, color, alpha, normal):
-        self._add("ggx_transmission", color, alpha=alpha, normal=normal)
-
     def diffuse(self, color):
         self._add("diffuse", color)
 
@@ -115,6 +112,11 @@ class NumpyBackend:
 
     def dielectric(self, color, alpha, ior):
         self._add("dielectric", color, alpha=alpha, ior=ior)
+
+    def transparency(self) -> np.ndarray:
+        """The summed weight of transparent closures (light passing straight through), (N, 3)."""
+        return sum((np.broadcast_to(c, (self.n, 3)) for k, c, _ in self.closures if k == "transparent"),
+                   np.zeros((self.n, 3)))
 
     def evaluate(self, wi: np.ndarray) -> np.ndarray:
         """The BSDF value (no cosine) that the recorded closures give for light from ``wi``."""
@@ -268,10 +270,6 @@ class OslBackend:
         else:
             self._closure(1.0, f'generalized_schlick_bsdf({normal.code}, {t}, {_osl(color).code}, color(0), '
                                f'{ax}, {ay}, {_osl(f0).code}, color(1), 5.0, "ggx")')
-
-    def flake_transmission(self, color, alpha, normal):
-        a = _osl(alpha).code
-        self._closure(color, f'microfacet("ggx", {normal.code}, Tn, {a}, {a}, 1.0, 1)')
 
     def diffuse(self, color):
         self._closure(color, "diffuse(N)")

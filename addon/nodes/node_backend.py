@@ -225,11 +225,6 @@ class NodeBackend:
             inputs["Tangent"] = tangent
         self._closure("ShaderNodeBsdfGlossy", inputs, distribution="GGX")
 
-    def flake_transmission(self, color, alpha, normal):
-        """Refraction BSDF (GGX) with IOR 1: see closures_np.ggx_transmission_eta1."""
-        self._closure("ShaderNodeBsdfRefraction", {"Color": color, "Roughness": self._roughness(alpha),
-                                                   "IOR": 1.0, "Normal": normal}, distribution="GGX")
-
     def diffuse(self, color):
         self._closure("ShaderNodeBsdfDiffuse", {"Color": color})
 

@@ -9,14 +9,14 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
   height-correlated Smith); the (1 − τ²) factor is G of Eq. 12 at Λi = Λo. [approx: mirror-G]
   A tilted flake normal keeps the GGX lobe around it. [approx: tilted-flakes]
 * fiber layers: the same with an anisotropic GGX, exact for in-plane fibers (see ``_fiber_lobe``).
-* flake transmission: GGX refraction with IOR 1, which Cycles evaluates as D(h) G2 / (4|cos i||cos o|) with
-  h ∝ ωi + ωo — the form of Eq. 13 — weighted by Eq. 14 with the light at normal incidence
-  (``_transmission_g``). Cycles' anisotropic refraction does not follow that form (measured), so fibers
-  transmit through an isotropic lobe with α = sqrt(α_x α_y). [approx: isotropic-fiber-transmission]
-  The flakes' Schlick F is evaluated at h = n in transmission, where |ωi·h| = |ωo·h| = cos θo.
-  [approx: schlick-at-view]
-* hg layers: Lambert reflection and translucency carrying the single-scattering estimates
-  γ · p · ½(1 − τ²) and γ · (1 − p) · G_t, p the backward share of HG scattering. [approx: lambert-hg]
+* transmission (every layer): Lambert translucency carrying the single-scattering transmittance estimate
+  γ · p · (Tρ/cos θo) · G_t, with p the share of scattering that leaves downwards for light along the normal
+  and G_t Eq. 14 with the light at normal incidence (``_transmission_g``). [approx: translucent-lobe]
+  Cycles' GGX refraction with IOR 1 evaluates exactly Eq. 13's form under lamps, but samples it as a
+  straight-through refraction: under environment light it renders as transparency (measured: furnace
+  albedo 1.0 instead of 0.15 for α = 0.3), so it is not used. Flakes' Schlick F is evaluated at h = n.
+* hg layers: Lambert reflection carrying γ · (1 − p) · ½(1 − τ²), p the forward share of HG scattering.
+  [approx: lambert-hg]
 * attenuation by the layers above is ∏ τ_j(ωo)² for reflection (Sec. 4.3 with τ(ωi) ≈ τ(ωo)), and
   ∏ τ_j(ωo) · ∏ τ_j(n) for transmission (layers above, layers below). [approx: mirror-attenuation]
 * substrate: its closure × ∏ τ_j(ωo)² (Sec. 4.4). [approx: substrate-attenuation]
@@ -50,9 +50,11 @@ APPROXIMATIONS = {
     "fiber-along-normal": ("fibers along the normal (sheen) become an isotropic α = 1 lobe",
                            _one(type="fiber", roughness=0.3, thickness=1e4, orientation=[0, 0, 1])),
     "transmission-normal-light": ("transmission weight (Eq. 14) with the light at normal incidence",
-                                  _one(type="surface", roughness=0.3, thickness=1.0)),
-    "isotropic-fiber-transmission": ("Cycles refracts isotropically: fiber transmission uses α = sqrt(α_t α_b)",
-                                     _one(type="fiber", roughness=0.1, thickness=1.0, orientation=[1, 0, 0])),
+                                  _one(type="surface", roughness=0.3, thickness=0.1)),
+    "translucent-lobe": ("every layer's transmission as Lambert translucency (no lobe shape)",
+                         _one(type="surface", roughness=0.5, thickness=1.0)),
+    "flake-transmission-share": ("flakes transmit the share of light along the normal they scatter downwards",
+                                 _one(type="fiber", roughness=0.1, thickness=1.0, orientation=[1, 0, 0])),
     "lambert-hg": ("HG layers as Lambert reflection and translucency with single-scattering albedo estimates",
                    _one(type="hg", roughness=0.7, thickness=1.0)),
     "mirror-attenuation": ("attenuation by other layers along ωi taken equal to that along ωo (reflection)",
@@ -132,17 +134,15 @@ def shade(b, p: model.Params) -> None:
         above = _prod(*taus[:k]) if k else None
         below = _prod(*[u["tau_n"] for u in terms[k + 1:]]) if k + 1 < len(terms) else None
         reflected = _prod(0.5 * (1.0 - t["tau"] * t["tau"]), above, above)  # Eq. 12 at Λi = Λo, Sec. 4.3
-        transmitted = _prod(_transmission_g(b, t), above, below)
+        transmitted = b.scale(t["albedo"], _prod(t["p_down"] * t["depth"] * _transmission_g(b, t), above, below))
         if layer.is_flake:
-            lobe = (t["alpha_x"], t["alpha_y"], t["normal"], t.get("tangent"))
-            b.glossy(b.scale(t["albedo"], reflected), *lobe, t.get("f0"))
-            color = b.scale(t["albedo"], transmitted)
+            b.glossy(b.scale(t["albedo"], reflected), t["alpha_x"], t["alpha_y"], t["normal"], t.get("tangent"),
+                     t.get("f0"))
             if "f0" in t:
-                color = schlick_at_view(b, color, t["f0"], t["normal"])
-            b.flake_transmission(color, b.sqrt(t["alpha_x"] * t["alpha_y"]), t["normal"])
+                transmitted = schlick_at_view(b, transmitted, t["f0"], t["normal"])
         else:
-            b.diffuse(b.scale(t["albedo"], t["p_back"] * reflected))
-            b.translucent(b.scale(t["albedo"], (1.0 - t["p_back"]) * transmitted))
+            b.diffuse(b.scale(t["albedo"], (1.0 - t["p_down"]) * reflected))
+        b.translucent(transmitted)
     stack = _prod(*taus)
     if p.substrate is not None:
         _substrate(b, p.substrate, stack * stack)
@@ -151,16 +151,13 @@ def shade(b, p: model.Params) -> None:
 
 
 def _transmission_g(b, t):
-    """Eq. 14's G·(Λi + Λo)/2 with the light at normal incidence on the far side: with a = Tρ|Λ(n)|,
-    x = Tρ|Λ(ωo)|, it is (e^{−x} − e^{−a})(a + x) / (2(a − x)), and a x e^{−x} → x e^{−x} as x → a.
-    The factor (a + x)/2 turns the closure's Smith G2 = 2/(|Λi| + |Λo|) into Eq. 14's.
-    [approx: transmission-normal-light]"""
+    """Eq. 14's G / Tρ with the light at normal incidence on the far side: with x = Tρ|Λ(ωo)| and
+    a = Tρ|Λ(n)|, (e^{−x} − e^{−a}) / (a − x), which tends to e^{−x} as x → a. [approx: transmission-normal-light]"""
     a, x = t["x_n"], t["x"]
     d = a - x
     near = b.step_below(b.abs(d), 1e-4)
-    exact = (b.exp(-x) - b.exp(-a)) * (a + x) / (2.0 * (d + near))  # the + near keeps the unused branch finite
-    limit = x * b.exp(-x)
-    return exact * (1.0 - near) + limit * near
+    exact = (b.exp(-x) - b.exp(-a)) / (d + near)  # the + near keeps the unused branch finite
+    return exact * (1.0 - near) + b.exp(-x) * near
 
 
 def _layer_terms(b, k: int, layer: model.Layer, mu) -> dict:
@@ -182,9 +179,14 @@ def _layer_terms(b, k: int, layer: model.Layer, mu) -> dict:
             t.update(_fiber_lobe(b, rough, c_n, direction))
         if layer.has_fresnel:
             t["f0"] = b.input(name + "F0", "color")
+        # light along the normal leaves downwards off flakes tilted beyond 45°: P(tan² θm > 1) = α²/(1 + α²)
+        # for GGX (α² = α_x α_y for fibers) [approx: flake-transmission-share]
+        ax2 = t["alpha_x"] * t["alpha_y"]
+        t["p_down"] = ax2 / (1.0 + ax2)
     else:
-        t["p_back"] = _hg_back_share(b, rough)
-    t["x"] = thickness * sigma / mu
+        t["p_down"] = 1.0 - _hg_back_share(b, rough)
+    t["depth"] = thickness / mu  # Tρ / cos θo
+    t["x"] = t["depth"] * sigma
     t["x_n"] = thickness * sigma_n
     t["tau"] = b.exp(-t["x"])
     t["tau_n"] = b.exp(-t["x_n"])

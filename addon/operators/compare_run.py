@@ -17,7 +17,7 @@ from .. import presets
 from ..bake.exr import atomic_path, read_exr, read_png, write_png
 from ..models import MODELS
 from ..nodes import material as lamina_material
-from ..nodes import predicted_eval
+from ..nodes import predicted_image
 from ..reference import metrics
 from ..reference import scenes as ref_scenes
 from . import blend_io, compare_core
@@ -46,7 +46,7 @@ ALBEDO_SAMPLES = 4096
 def reference_functions(model_id: str, p):
     """(eval, albedo) of the exact reference for ``p``: what every comparison measures against."""
     ref = reference_module(model_id)
-    return (lambda wi, wo: ref.eval(p, wi, wo)), (lambda wo: ref.directional_albedo(p, wo, n=ALBEDO_SAMPLES))
+    return (lambda wi, wo: ref.eval(p, wi, wo)), (lambda wo: ref.furnace_albedo(p, wo, n=ALBEDO_SAMPLES))
 
 
 def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_dir: str, progress=None) -> dict:
@@ -55,17 +55,12 @@ def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_
     bsdf_eval, bsdf_albedo = reference_functions(model_id, p)
     specs = scene_specs(scenes, resolution)
     report = compare_core.compare(mat, bsdf_eval, specs, samples, seed, out_dir, progress, bsdf_albedo=bsdf_albedo)
-    predicted = predicted_eval(model_id, p, lamina_material.form_of(mat))
+    form = lamina_material.form_of(mat)
     for spec in specs:
         reference = read_exr(report[spec.name]["files"]["reference"], "RGB")
-        report[spec.name]["mapping_rel_rmse"] = mapping_error(spec, predicted, reference)
+        approx = predicted_image(model_id, p, form, spec)
+        report[spec.name]["mapping_rel_rmse"] = metrics.rel_rmse(approx, reference, ref_scenes.scene_mask(spec))
     return report
-
-
-def mapping_error(spec, predicted, reference) -> float:
-    """Relative RMSE of a form's numpy prediction against the reference image (no sampling noise)."""
-    approx = ref_scenes.reference_image(spec, predicted)
-    return metrics.rel_rmse(approx, reference, ref_scenes.scene_mask(spec))
 
 
 def compare_params(model_id: str, p, forms, scenes, samples: int, resolution: int, seed: int, out_dir: str,

@@ -110,7 +110,7 @@ def _configure(scene, spec, samples, seed, osl):
     c.glossy_bounces = 0
     c.transmission_bounces = 0
     c.volume_bounces = 0
-    c.transparent_max_bounces = 0
+    c.transparent_max_bounces = 8  # lets the furnace see delta transmission (transparent closures)
     c.min_light_bounces = 0
     c.min_transparent_bounces = 0
     c.sample_clamp_direct = 0.0

@@ -31,7 +31,7 @@ from . import hg, microfacet, sggx
 from .frames import as_directions, dot, spherical
 
 __all__ = ["Params", "Sample", "params_from_dict", "eval", "pdf", "sample", "delta_transmittance",
-           "directional_albedo", "ground_truth"]
+           "directional_albedo", "furnace_albedo", "ground_truth"]
 
 
 class Sample(NamedTuple):
@@ -293,6 +293,12 @@ def directional_albedo(params: Params, wo, n: int = 16384, seed: int = 0, split:
         reflection[row] = np.sum(value * same, axis=0)
         transmission[row] = np.sum(value * ~same, axis=0)
     return (reflection, transmission) if split else reflection + transmission
+
+
+def furnace_albedo(params: Params, wo, n: int = 4096, seed: int = 0):
+    """What a white furnace returns towards wo: the directional albedo plus the Dirac part (N, 3)."""
+    wo = as_directions(wo)
+    return directional_albedo(params, wo, n=n, seed=seed) + delta_transmittance(params, wo)
 
 
 # ----------------------------------------------------------------------------------- ground truth walk
