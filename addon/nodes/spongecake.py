@@ -9,17 +9,19 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
   height-correlated Smith); the (1 − τ²) factor is G of Eq. 12 at Λi = Λo. [approx: mirror-G]
   A tilted flake normal keeps the GGX lobe around it. [approx: tilted-flakes]
 * fiber layers: the same with an anisotropic GGX, exact for in-plane fibers (see ``_fiber_lobe``).
-* transmission (every layer): Lambert translucency carrying the single-scattering transmittance estimate
-  γ · p · (Tρ/cos θo) · G_t, with p the share of scattering that leaves downwards for light along the normal
-  and G_t Eq. 14 with the light at normal incidence (``_transmission_g``). [approx: translucent-lobe]
+* transmission (no substrate): Lambert translucency carrying a single-scattering transmittance estimate
+  γ · p · path · G_t: p the share of scattering that leaves downwards for light along the normal, path the
+  layer's scattering depth along ωo (``_layer_terms``), G_t Eq. 14 with the light leaving at cos θ = 1/2
+  (``_slab_transmission``). [approx: translucent-lobe]
   Cycles' GGX refraction with IOR 1 evaluates exactly Eq. 13's form under lamps, but samples it as a
   straight-through refraction: under environment light it renders as transparency (measured: furnace
   albedo 1.0 instead of 0.15 for α = 0.3), so it is not used. Flakes' Schlick F is evaluated at h = n.
-* hg layers: Lambert reflection carrying γ · (1 − p) · ½(1 − τ²), p the forward share of HG scattering.
+* hg layers (and fibers along n): Lambert reflection carrying γ · p_back · path · G_r likewise.
   [approx: lambert-hg]
 * attenuation by the layers above is ∏ τ_j(ωo)² for reflection (Sec. 4.3 with τ(ωi) ≈ τ(ωo)), and
-  ∏ τ_j(ωo) · ∏ τ_j(n) for transmission (layers above, layers below). [approx: mirror-attenuation]
-* substrate: its closure × ∏ τ_j(ωo)² (Sec. 4.4). [approx: substrate-attenuation]
+  ∏ τ_j(ωo) · ∏ τ_j(60°) for transmission (layers above, layers below). [approx: mirror-attenuation]
+* substrate: its closure × ∏ τ_j(ωo) × ∏ τ_j(ωi), with ωi the mirror direction for glossy substrates and
+  cos θi = 1/2 for a diffuse one (Sec. 4.4). [approx: substrate-attenuation]
 * delta transmission: transparent × ∏ τ_j(ωo) — exact (ωi = −ωo and σ is symmetric).
 
 The node-group form also evaluates Schlick's F at h = flake normal [approx: schlick-at-view];
@@ -49,19 +51,21 @@ APPROXIMATIONS = {
                      _one(type="fiber", roughness=0.3, thickness=1e4, orientation=[0.707, 0, 0.707])),
     "fiber-along-normal": ("fibers along the normal (sheen) become an isotropic α = 1 lobe",
                            _one(type="fiber", roughness=0.3, thickness=1e4, orientation=[0, 0, 1])),
-    "transmission-normal-light": ("transmission weight (Eq. 14) with the light at normal incidence",
-                                  _one(type="surface", roughness=0.3, thickness=0.1)),
+    "diffusivity-exit": ("Lambert lobes: scattered light leaves the layer at cos θ = 1/2 (Eqs. 12, 14)",
+                         _one(type="hg", roughness=0.0, thickness=1.0)),
     "translucent-lobe": ("every layer's transmission as Lambert translucency (no lobe shape)",
                          _one(type="surface", roughness=0.5, thickness=1.0)),
-    "flake-transmission-share": ("flakes transmit the share of light along the normal they scatter downwards",
-                                 _one(type="fiber", roughness=0.1, thickness=1.0, orientation=[1, 0, 0])),
-    "lambert-hg": ("HG layers as Lambert reflection and translucency with single-scattering albedo estimates",
+    "scattering-share": ("the share of light scattered downwards taken from normal incidence",
+                         _one(type="surface", roughness=0.5, thickness=0.1)),
+    "fiber-transmission-share": ("in-plane fibers transmit a fitted share of light along the normal",
+                                 _one(type="fiber", roughness=0.5, thickness=1.0, orientation=[1, 0, 0])),
+    "lambert-hg": ("HG layers as Lambert reflection and translucency (forward-scattering shape lost)",
                    _one(type="hg", roughness=0.7, thickness=1.0)),
     "mirror-attenuation": ("attenuation by other layers along ωi taken equal to that along ωo (reflection)",
                            {"layers": [{"type": "surface", "roughness": 0.3, "thickness": 0.3, "albedo": [1, 1, 1]},
                                        {"type": "surface", "roughness": 0.6, "thickness": 1e4,
                                         "albedo": [1, 1, 1]}]}),
-    "substrate-attenuation": ("the substrate is attenuated by ∏ τ(ωo)² instead of ∏ τ(ωi) τ(ωo)",
+    "substrate-attenuation": ("the substrate's light-side attenuation at the mirror direction (glossy) or 60° (diffuse)",
                               {**_one(type="surface", roughness=0.05, thickness=0.2),
                                "substrate": {"type": "diffuse", "albedo": [0.8, 0.8, 0.8]}}),
     "conductor-f0-blender-4.2": ("Blender 4.2 node group only (no Metallic BSDF node): Principled metal with the "
@@ -132,32 +136,42 @@ def shade(b, p: model.Params) -> None:
     taus = [t["tau"] for t in terms]
     for k, (layer, t) in enumerate(zip(p.layers, terms)):
         above = _prod(*taus[:k]) if k else None
-        below = _prod(*[u["tau_n"] for u in terms[k + 1:]]) if k + 1 < len(terms) else None
+        below = _prod(*[u["tau_exit"] for u in terms[k + 1:]]) if k + 1 < len(terms) else None
         reflected = _prod(0.5 * (1.0 - t["tau"] * t["tau"]), above, above)  # Eq. 12 at Λi = Λo, Sec. 4.3
-        transmitted = b.scale(t["albedo"], _prod(t["p_down"] * t["depth"] * _transmission_g(b, t), above, below))
+        transmitted = b.scale(t["albedo"], _prod(t["p_down"] * t["path"] * _slab_transmission(b, t), above, below))
         if layer.is_flake:
-            b.glossy(b.scale(t["albedo"], reflected), t["alpha_x"], t["alpha_y"], t["normal"], t.get("tangent"),
-                     t.get("f0"))
+            b.glossy(b.scale(t["albedo"], _prod(t.get("glossy_share"), reflected)), t["alpha_x"], t["alpha_y"],
+                     t["normal"], t.get("tangent"), t.get("f0"))
             if "f0" in t:
                 transmitted = schlick_at_view(b, transmitted, t["f0"], t["normal"])
-        else:
-            b.diffuse(b.scale(t["albedo"], (1.0 - t["p_down"]) * reflected))
-        b.translucent(transmitted)
+        if "diffuse_share" in t:
+            diffuse = t["diffuse_share"] * t["path"] * _slab_reflection(b, t)
+            b.diffuse(b.scale(t["albedo"], _prod(diffuse, above, above)))
+        if p.substrate is None:  # a substrate closes the stack (reference convention)
+            b.translucent(transmitted)
     stack = _prod(*taus)
     if p.substrate is not None:
-        _substrate(b, p.substrate, stack * stack)
+        exit_ = stack if p.substrate.type != "diffuse" else _prod(*[t["tau_exit"] for t in terms])
+        _substrate(b, p.substrate, stack * exit_)
     if p.delta_transmission:
         b.transparent(b.scale((1.0, 1.0, 1.0), stack))
 
 
-def _transmission_g(b, t):
-    """Eq. 14's G / Tρ with the light at normal incidence on the far side: with x = Tρ|Λ(ωo)| and
-    a = Tρ|Λ(n)|, (e^{−x} − e^{−a}) / (a − x), which tends to e^{−x} as x → a. [approx: transmission-normal-light]"""
-    a, x = t["x_n"], t["x"]
+def _slab_transmission(b, t):
+    """Eq. 14's G / Tρ for light leaving the far side at cos θ = 1/2, a = 2 Tρ σ(60°) (the diffusivity
+    approximation of radiative transfer): (e^{−x} − e^{−a}) / (a − x), → e^{−x} as x → a.
+    [approx: diffusivity-exit]"""
+    a, x = t["x_exit"], t["x"]
     d = a - x
     near = b.step_below(b.abs(d), 1e-4)
     exact = (b.exp(-x) - b.exp(-a)) / (d + near)  # the + near keeps the unused branch finite
     return exact * (1.0 - near) + b.exp(-x) * near
+
+
+def _slab_reflection(b, t):
+    """Eq. 12's G / Tρ for light leaving the near side at cos θ = 1/2: (1 − e^{−(x + a)}) / (x + a)."""
+    s = t["x"] + t["x_exit"]
+    return (1.0 - b.exp(-s)) / b.maximum(s, 1e-12)
 
 
 def _layer_terms(b, k: int, layer: model.Layer, mu) -> dict:
@@ -165,31 +179,35 @@ def _layer_terms(b, k: int, layer: model.Layer, mu) -> dict:
     rough = b.input(name + ("Roughness" if layer.is_flake else "Mean Cosine g"), "float")
     t = {"albedo": b.input(name + "Albedo", "color")}
     thickness = b.input(name + "Thickness", "float")
-    sigma = sigma_n = 1.0
+    sigma = sigma_60 = 1.0
     if layer.is_flake:
         direction = b.direction(b.input(name + "Orientation", "vector"))
         c, c_n = b.dot_view(direction), b.dot(direction, b.normal())
         a2 = rough * rough
         # σ(ω) = sqrt(ωᵀ S ω) for S of Sec. 3.3 rotated to the orientation (research notes §1)
         if layer.type == "surface":
-            sigma, sigma_n = b.sqrt(a2 + (1.0 - a2) * c * c), b.sqrt(a2 + (1.0 - a2) * c_n * c_n)
+            sigma, sigma2_n, trace = b.sqrt(a2 + (1.0 - a2) * c * c), a2 + (1.0 - a2) * c_n * c_n, 1.0 + 2.0 * a2
             t.update(alpha_x=rough, alpha_y=rough, normal=direction)
         else:
-            sigma, sigma_n = b.sqrt(1.0 + (a2 - 1.0) * c * c), b.sqrt(1.0 + (a2 - 1.0) * c_n * c_n)
+            sigma, sigma2_n, trace = b.sqrt(1.0 + (a2 - 1.0) * c * c), 1.0 + (a2 - 1.0) * c_n * c_n, 2.0 + a2
             t.update(_fiber_lobe(b, rough, c_n, direction))
+        # σ at 60° from n, mean over azimuth: σ² = sin²60 (tr S − S_nn)/2 + cos²60 S_nn
+        sigma_60 = b.sqrt(0.375 * (trace - sigma2_n) + 0.25 * sigma2_n)
         if layer.has_fresnel:
             t["f0"] = b.input(name + "F0", "color")
-        # light along the normal leaves downwards off flakes tilted beyond 45°: P(tan² θm > 1) = α²/(1 + α²)
-        # for GGX (α² = α_x α_y for fibers) [approx: flake-transmission-share]
-        ax2 = t["alpha_x"] * t["alpha_y"]
-        t["p_down"] = ax2 / (1.0 + ax2)
+        if layer.type == "surface":  # light along n leaves downwards off flakes tilted beyond 45°: P = α²/(1+α²)
+            t["p_down"] = a2 / (1.0 + a2)
     else:
         t["p_down"] = 1.0 - _hg_back_share(b, rough)
-    t["depth"] = thickness / mu  # Tρ / cos θo
-    t["x"] = t["depth"] * sigma
-    t["x_n"] = thickness * sigma_n
+        t["diffuse_share"] = 1.0 - t["p_down"]
+    t["x"] = thickness * sigma / mu  # optical depth along ωo
+    t["x_exit"] = 2.0 * thickness * sigma_60  # optical depth at cos θ = 1/2
+    # Single-scattering path factor: Tρ σ(ωo) P_down(ωo) / cos θo ≈ x for fibers and media (P_down taken from
+    # normal incidence); for surface flakes σ(ωo) P_down(ωo) is nearly view-independent (∫ D(h) dωi, measured),
+    # so Tρ / cos θo. [approx: scattering-share]
+    t["path"] = thickness / mu if layer.type == "surface" else t["x"]
     t["tau"] = b.exp(-t["x"])
-    t["tau_n"] = b.exp(-t["x_n"])
+    t["tau_exit"] = b.exp(-t["x_exit"])
     return t
 
 
@@ -204,12 +222,21 @@ def _hg_back_share(b, g):
 
 def _fiber_lobe(b, alpha, c_n, tangent) -> dict:
     """Fibers along an in-plane tangent t: S = diag(α², 1, 1) in (t, n×t, n), so D is the anisotropic GGX with
-    (α_t, α_b) = (α, 1) and Λ_sggx = 1 + 2Λ_smith — exact, like surface flakes. Tilting t out of the plane
-    (c_n = t·n) blends α_t towards 1 (isotropic GGX α = 1 for fibers along n, whose exact lobe, GGX with
-    α = 1/α > 1, Cycles cannot express). [approx: tilted-fiber] [approx: fiber-along-normal]"""
-    in_plane = 1.0 - c_n * c_n
-    return {"alpha_x": 1.0 + (alpha - 1.0) * in_plane, "alpha_y": 1.0, "normal": b.normal(),
-            "tangent": b.tangent_plane(tangent)}
+    (α_t, α_b) = (α, 1) and Λ_sggx = 1 + 2Λ_smith — exact, like surface flakes. Fibers along n have the
+    isotropic GGX lobe of α = 1/α > 1, which Cycles clamps to 1 (measured), so they become a Lambert lobe
+    carrying their backward share for light along n, α²/(1 + α²); the grazing sheen this layer shows (grazing
+    light is turned back even by nearly vertical fibers) is lost [approx: fiber-along-normal]. Tilted fibers
+    mix the two by the in-plane share s = 1 − (t·n)². [approx: tilted-fiber]
+    Downward share for light along n: α²/(1+α²) backwards → 1/(1+α²) for fibers along n; for in-plane fibers
+    1 − 1/√2 at α → 0 and 1/2 at α = 1, in between (1 − 1/√2) + (√2 − 1) α²/(1+α²) (within 0.01 of the
+    sampled share). [approx: fiber-transmission-share]"""
+    s = 1.0 - c_n * c_n
+    a2 = alpha * alpha
+    back_along_n = a2 / (1.0 + a2)
+    down_in_plane = (1.0 - 0.5 ** 0.5) + (2.0 ** 0.5 - 1.0) * back_along_n
+    return {"alpha_x": alpha, "alpha_y": 1.0, "normal": b.normal(), "tangent": b.tangent_plane(tangent),
+            "glossy_share": s, "diffuse_share": (1.0 - s) * back_along_n,
+            "p_down": s * down_in_plane + (1.0 - s) * (1.0 - back_along_n)}
 
 
 def _substrate(b, s: model.Substrate, weight) -> None:
