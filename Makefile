@@ -25,7 +25,7 @@ demo: venv
 	$(PY) -m addon.cli demo --out $(OUT)
 
 bench: venv
-	$(PY) -m addon.cli bench --out docs
+	$(PY) -m addon.cli bench --out docs --resolution 48 --samples 32
 
 extension: venv
 	mkdir -p dist
