@@ -68,14 +68,19 @@ def ggx(ax, ay):
 
 # -------------------------------------------------------------------------------- materials
 
-def _material(name, bl_idname, **inputs):
+def _empty_material(name):
+    """A new material with only a Material Output node: (material, node tree, output node)."""
     m = bpy.data.materials.new(name)
     if getattr(m, "node_tree", None) is None:
         m.use_nodes = True
     nt = m.node_tree
     for n in list(nt.nodes):
         nt.nodes.remove(n)
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    return m, nt, nt.nodes.new("ShaderNodeOutputMaterial")
+
+
+def _material(name, bl_idname, **inputs):
+    m, nt, out = _empty_material(name)
     node = nt.nodes.new(bl_idname)
     for key, value in inputs.items():
         if key == "distribution":
@@ -173,13 +178,7 @@ def _osl_material(tmp_path, name, source, inputs=()):
     src.write_text(source)
     oso = tmp_path / f"{name}.oso"
     assert _cycles.osl_compile(str(src), str(oso))
-    m = bpy.data.materials.new(name)
-    if getattr(m, "node_tree", None) is None:
-        m.use_nodes = True
-    nt = m.node_tree
-    for n in list(nt.nodes):
-        nt.nodes.remove(n)
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    m, nt, out = _empty_material(name)
     script = nt.nodes.new("ShaderNodeScript")
     script.mode = "INTERNAL"
     code = oso.read_text()
