@@ -2,10 +2,12 @@
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
+VENV42 := .venv-blender-4.2
+PY42 := $(VENV42)/bin/python
 EXT_TOOL = $(wildcard $(VENV)/lib/python3.11/site-packages/bpy/*/scripts/addons_core/bl_pkg/cli/blender_ext.py)
 OUT ?= out
 
-.PHONY: venv test test-all demo bench extension clean
+.PHONY: venv test test-4.2 test-all demo bench extension clean
 
 venv: $(VENV)/.stamp
 
@@ -15,8 +17,17 @@ $(VENV)/.stamp: requirements.txt
 	$(PY) -m pip install --quiet -r requirements.txt
 	touch $@
 
-test: venv
+$(VENV42)/.stamp: requirements-blender-4.2.txt
+	$(PYTHON) -m venv $(VENV42)
+	$(PY42) -m pip install --quiet -r requirements-blender-4.2.txt
+	touch $@
+
+# The whole suite on bpy 5.0, then the Blender tests again on Blender 4.2 LTS (the oldest supported).
+test: venv test-4.2
 	$(PY) -m pytest -m "not slow" -q
+
+test-4.2: $(VENV42)/.stamp
+	$(PY42) -m pytest -m "not slow" -q -p no:cacheprovider tests/blender
 
 test-all: venv
 	$(PY) -m pytest -q
