@@ -13,8 +13,15 @@ def _blender_modules():
 
 
 def register():
-    for module in _blender_modules():
-        module.register()
+    done = []
+    try:
+        for module in _blender_modules():
+            module.register()
+            done.append(module)
+    except Exception:  # leave nothing half-registered behind
+        for module in reversed(done):
+            module.unregister()
+        raise
 
 
 def unregister():

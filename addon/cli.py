@@ -13,6 +13,7 @@ import sys
 from . import presets
 from .models import MODELS
 from .models.params import ParamError
+from .nodes import FORMS
 from .reference.scenes import KINDS
 
 SCENES = KINDS
@@ -55,11 +56,11 @@ def _material_args(p) -> None:
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--preset", help="a preset name (see list-presets)")
     g.add_argument("--params", help="a JSON file with the model's parameter dict")
-    p.add_argument("--form", default="nodes", choices=("nodes", "osl"))
+    p.add_argument("--form", default="nodes", choices=FORMS)
 
 
 def _compare_args(p) -> None:
-    p.add_argument("--forms", default="osl,nodes", help="comma-separated: osl, nodes")
+    p.add_argument("--forms", default=",".join(FORMS), help=f"comma-separated: {', '.join(FORMS)}")
     p.add_argument("--scenes", default=",".join(SCENES), help=f"comma-separated: {', '.join(SCENES)}")
     p.add_argument("--samples", type=int, default=128, help="Cycles samples per pixel")
     p.add_argument("--resolution", type=int, default=96, help="image width and height in pixels")
@@ -99,7 +100,7 @@ def _split(value: str, allowed, what: str) -> list[str]:
 def _check_compare_args(args) -> tuple[list[str], list[str]]:
     if args.samples < 1 or args.resolution < 8:
         raise CliError("--samples must be ≥ 1 and --resolution ≥ 8")
-    return _split(args.forms, ("osl", "nodes"), "form"), _split(args.scenes, SCENES, "scene")
+    return _split(args.forms, FORMS, "form"), _split(args.scenes, SCENES, "scene")
 
 
 # -------------------------------------------------------------------------------------------- commands

@@ -3,6 +3,7 @@ a native node group (``node_backend``) and an OSL script node (``osl``); ``mater
 from . import spongecake
 
 MAPPINGS = {"spongecake": spongecake}
+FORMS = ("nodes", "osl")  # node group (every device) and OSL script (CPU, OptiX)
 
 
 def _backend(model_id: str, p, form: str, wo):

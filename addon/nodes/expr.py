@@ -46,9 +46,6 @@ class NumpyBackend:
             return np.broadcast_to(v, (self.n,)).copy()
         return np.broadcast_to(v, (self.n, 3)).copy()
 
-    def const(self, v):
-        return v
-
     def cos_view(self):
         return np.maximum(self.wo[:, 2], MIN_COS)
 
@@ -75,8 +72,6 @@ class NumpyBackend:
     # -- math
     exp = staticmethod(np.exp)
     sqrt = staticmethod(lambda x: np.sqrt(np.maximum(x, 0.0)))
-    log = staticmethod(lambda x: np.log(np.maximum(x, 1e-300)))
-    minimum = staticmethod(np.minimum)
     maximum = staticmethod(np.maximum)
     abs = staticmethod(np.abs)
 
@@ -201,9 +196,6 @@ class OslBackend:
     def input(self, name: str, kind: str):
         return OslValue(osl_identifier(name), "color" if kind in ("color", "vector") else kind)
 
-    def const(self, v):
-        return _osl(v)
-
     def _let(self, value: OslValue, kind=None) -> OslValue:
         self._count += 1
         name = f"t{self._count}"
@@ -242,17 +234,11 @@ class OslBackend:
     def sqrt(self, x):
         return self._call("sqrt", self.maximum(x, 0.0))
 
-    def log(self, x):
-        return self._call("log", self.maximum(x, 1e-30))
-
     def abs(self, x):
         return self._call("abs", x)
 
     def step_below(self, x, edge):
         return self._let(OslValue(f"({_osl(x).code} < {_osl(edge).code} ? 1.0 : 0.0)", "float"))
-
-    def minimum(self, a, b):
-        return self._call("min", a, b)
 
     def maximum(self, a, b):
         return self._call("max", a, b)
@@ -321,8 +307,3 @@ def schlick_at_view(b, color, f0, normal):
     c = 1.0 - b.maximum(b.dot_view(normal), 0.0)
     c2 = c * c
     return color * (f0 + b.scale(1.0 - f0, c2 * c2 * c))
-
-
-def clamp01(b, x):
-    return b.minimum(b.maximum(x, 0.0), 1.0)
-

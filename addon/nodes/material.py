@@ -12,12 +12,11 @@ import json
 import bpy
 
 from ..models import MODELS
-from . import MAPPINGS, osl
+from . import FORMS, MAPPINGS, osl
 from .expr import TANGENT_INPUT, OslBackend
 from .node_backend import NodeBackend
 
 GENERATOR_VERSION = 1  # bump when generated shaders change, so cached groups are not reused
-FORMS = ("nodes", "osl")
 SOCKET_TYPES = {"float": "NodeSocketFloat", "color": "NodeSocketColor", "vector": "NodeSocketVector"}
 
 

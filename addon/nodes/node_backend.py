@@ -88,9 +88,6 @@ class NodeBackend:
     def input(self, name: str, kind: str) -> NodeValue:
         return NodeValue(self, self.group_input.outputs[name], "color" if kind == "vector" else kind, 0)
 
-    def const(self, v):
-        return v
-
     def geometry(self):
         if self._geometry is None:
             geo = self._node("ShaderNodeNewGeometry", 0)  # its Tangent is the closures' default tangent
@@ -163,17 +160,11 @@ class NodeBackend:
     def sqrt(self, x):
         return self._math("SQRT", self.maximum(x, 0.0))
 
-    def log(self, x):
-        return self._math("LOGARITHM", self.maximum(x, 1e-30), 2.718281828459045)
-
     def abs(self, x):
         return self._math("ABSOLUTE", x)
 
     def step_below(self, x, edge):
         return self._math("LESS_THAN", x, edge)
-
-    def minimum(self, a, b):
-        return self._math("MINIMUM", a, b)
 
     def maximum(self, a, b):
         return self._math("MAXIMUM", a, b)

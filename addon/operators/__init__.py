@@ -15,8 +15,15 @@ _cli_handle = None
 
 def register():
     global _cli_handle
-    for cls in classes:
-        bpy.utils.register_class(cls)
+    done = []
+    try:
+        for cls in classes:
+            bpy.utils.register_class(cls)
+            done.append(cls)
+    except Exception:  # leave nothing half-registered behind
+        for cls in reversed(done):
+            bpy.utils.unregister_class(cls)
+        raise
     bpy.types.WindowManager.lamina_compare = bpy.props.PointerProperty(type=compare_op.LaminaCompareSettings)
     if hasattr(bpy.utils, "register_cli_command"):
         from .. import cli
