@@ -33,7 +33,7 @@ test-all: venv
 	$(PY) -m pytest -q
 
 demo: venv
-	$(PY) -m addon.cli demo --out $(OUT)
+	$(PY) -m addon.cli demo --out $(OUT) --resolution 64 --samples 64
 
 bench: venv
 	$(PY) -m addon.cli bench --out docs --resolution 48 --samples 32

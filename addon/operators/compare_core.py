@@ -44,7 +44,7 @@ def _samples_for(samples, scene) -> int:
 def compare(material, bsdf_eval: Callable, scenes: Sequence | None = None, samples=64, seed: int = 0,
             out_dir: str = ".", progress: Callable[[float, str], None] | None = None, *,
             bsdf_albedo: Callable | None = None, quadrature=(64, 128), worst: int = 10,
-            exposure: float | None = None, picture_scale: int = 1) -> dict:
+            exposure: float | None = None, picture_scale: int = 1, reference_cache: dict | None = None) -> dict:
     """Render every scene with Cycles (``material``) and with the reference (``bsdf_eval``).
 
     ``scenes``: ``Scene`` objects (default ``scenes.default_scenes()``), names must be unique.
@@ -52,6 +52,8 @@ def compare(material, bsdf_eval: Callable, scenes: Sequence | None = None, sampl
     Writes ``<scene>_cycles.exr``, ``<scene>_reference.exr`` (32-bit float RGB(A), row 0 = top) and
     ``<scene>_side_by_side.png`` (Cycles | reference | error heat map) into ``out_dir``, each atomically.
     ``progress(fraction, message)`` is called before each scene, half-way through it and at the end.
+    ``reference_cache`` (scene name → (reference image, seconds it took)), when given, is read and filled, so
+    that comparing several materials against the same reference renders it once.
 
     Returns ``{scene_name: {rmse, rel_rmse, max_abs_error, worst_pixels, cycles_seconds,
     reference_seconds, samples, seed, pixels, exposure, heat_vmax, kind, resolution, files}}``;
@@ -79,9 +81,12 @@ def compare(material, bsdf_eval: Callable, scenes: Sequence | None = None, sampl
         cyc, cycles_seconds = render_cycles(material, scene, spp, seed, cyc_path)
 
         tell((i + 0.5) / n, f"{scene.name}: reference")
-        t0 = time.perf_counter()
-        ref = _scenes.reference_image(scene, bsdf_eval, bsdf_albedo=bsdf_albedo, quadrature=quadrature)
-        reference_seconds = time.perf_counter() - t0
+        cache = {} if reference_cache is None else reference_cache
+        if scene.name not in cache:
+            t0 = time.perf_counter()
+            image = _scenes.reference_image(scene, bsdf_eval, bsdf_albedo=bsdf_albedo, quadrature=quadrature)
+            cache[scene.name] = (image, time.perf_counter() - t0)
+        ref, reference_seconds = cache[scene.name]
         write_exr(ref_path, ref)
 
         mask = _scenes.scene_mask(scene)

@@ -49,12 +49,15 @@ def reference_functions(model_id: str, p):
     return (lambda wi, wo: ref.eval(p, wi, wo)), (lambda wo: ref.furnace_albedo(p, wo, n=ALBEDO_SAMPLES))
 
 
-def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_dir: str, progress=None) -> dict:
-    """Cycles vs reference for an existing Lamina material (it is assigned to temporary objects, never edited)."""
+def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_dir: str, progress=None,
+                     reference_cache: dict | None = None) -> dict:
+    """Cycles vs reference for an existing Lamina material (it is assigned to temporary objects, never edited).
+    ``reference_cache`` lets several forms of the same parameters share the reference renders."""
     model_id, p = lamina_material.current_params(mat)
     bsdf_eval, bsdf_albedo = reference_functions(model_id, p)
     specs = scene_specs(scenes, resolution)
-    report = compare_core.compare(mat, bsdf_eval, specs, samples, seed, out_dir, progress, bsdf_albedo=bsdf_albedo)
+    report = compare_core.compare(mat, bsdf_eval, specs, samples, seed, out_dir, progress, bsdf_albedo=bsdf_albedo,
+                                  reference_cache=reference_cache)
     form = lamina_material.form_of(mat)
     for spec in specs:
         reference = read_exr(report[spec.name]["files"]["reference"], "RGB")
@@ -68,11 +71,13 @@ def compare_params(model_id: str, p, forms, scenes, samples: int, resolution: in
     """Build a temporary material per form, compare it, remove it again; write ``report.json``."""
     report = {"model": model_id, "label": label, "params": p.to_dict(), "samples": samples,
               "resolution": resolution, "seed": seed, "forms": {}}
+    references = {}
     for form in forms:
         before = blend_io.snapshot()
         try:
             mat = lamina_material.new_material(model_id, p, form, name=f"Lamina compare {label}")
-            entries = compare_material(mat, scenes, samples, resolution, seed, os.path.join(out_dir, form))
+            entries = compare_material(mat, scenes, samples, resolution, seed, os.path.join(out_dir, form),
+                                       reference_cache=references)
         finally:
             blend_io.remove_new_data(before)
         report["forms"][form] = {scene: _json_entry(e, out_dir) for scene, e in entries.items()}
