@@ -36,7 +36,8 @@ class LAMINA_OT_compare(bpy.types.Operator):
         self._mat = context.material
         self._scenes = list(compare_run.SCENES) if settings.scene == "ALL" else [settings.scene]
         self._done = []
-        self._out = tempfile.mkdtemp(prefix="lamina_compare_")
+        # Blender's session temp folder: removed when Blender exits; the picture shown is packed into the file
+        self._out = tempfile.mkdtemp(prefix="lamina_compare_", dir=bpy.app.tempdir or None)
         context.window_manager.progress_begin(0, len(self._scenes))
 
     def invoke(self, context, event):

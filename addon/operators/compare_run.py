@@ -115,13 +115,12 @@ def show_side_by_side(context, entries: dict, out_dir: str):
     import bpy
 
     path = next(iter(entries.values()))["files"]["side_by_side"]
-    image = bpy.data.images.get("Lamina Compare")
-    if image is None:
-        image = bpy.data.images.load(path)
-        image.name = "Lamina Compare"
-    else:
-        image.filepath = path
-        image.reload()
+    old = bpy.data.images.get("Lamina Compare")
+    if old is not None:  # Lamina's own picture from a previous comparison
+        bpy.data.images.remove(old)
+    image = bpy.data.images.load(path)
+    image.name = "Lamina Compare"
+    image.pack()  # survives the temporary folder and a saved file
     for area in context.screen.areas if context.screen else ():
         if area.type == "IMAGE_EDITOR":
             area.spaces.active.image = image

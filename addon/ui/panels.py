@@ -32,8 +32,9 @@ class LAMINA_PT_main(bpy.types.Panel):
         for value, label in (("nodes", "Node group"), ("osl", "OSL")):
             op = row.operator("lamina.set_form", text=label, depress=(form == value))
             op.form = value
-        if form == "osl" and context.scene.render.engine == "CYCLES" and not context.scene.cycles.shading_system:
-            box.label(text="OSL is off in Render Properties: renders black", icon="ERROR")
+        scene = context.scene
+        if form == "osl" and not (scene.render.engine == "CYCLES" and scene.cycles.shading_system):
+            box.label(text="OSL renders only in Cycles with Open Shading Language on", icon="ERROR")
         box.label(text="Edit the layer parameters on the Lamina node", icon="NODE")
 
 

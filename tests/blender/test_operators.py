@@ -66,3 +66,40 @@ def test_set_form_and_compare_from_the_operators(registered, sphere):
     assert "Lamina Compare" in bpy.data.images
     after = {c: len(getattr(bpy.data, c)) for c in counts}
     assert after == counts
+
+
+class _Layout:
+    """Records what a panel draws (a stand-in for bpy's UILayout, which only exists while Blender draws)."""
+
+    def __init__(self, log):
+        self.log = log
+        self.enabled = True
+
+    def __getattr__(self, name):
+        if name in ("row", "column", "box"):
+            return lambda *a, **k: _Layout(self.log)
+        return lambda *a, **k: self.log.append((name, a, k)) or type("Props", (), {})()
+
+
+@pytest.mark.parametrize("lamina", [False, True])
+def test_panels_draw_for_lamina_and_other_materials(registered, sphere, lamina):
+    from addon.ui import panels
+
+    if lamina:
+        bpy.ops.lamina.add_spongecake(preset="plastic", form="osl")
+    else:
+        sphere.data.materials.append(bpy.data.materials.new("plain"))
+    mat = sphere.active_material
+    log = []
+    context = type("Ctx", (), {"material": mat, "scene": bpy.context.scene,
+                               "window_manager": bpy.context.window_manager})()
+    for cls in panels.classes:
+        panel = type("P", (), {"layout": _Layout(log)})()
+        if cls.poll(context) if cls is panels.LAMINA_PT_compare else True:
+            cls.draw(panel, context)
+    labels = " ".join(str(a) for _, a, k in log) + " ".join(str(k.get("text", "")) for _, a, k in log)
+    if lamina:
+        assert "lamina.set_form" in labels and "lamina.compare" in labels
+        assert "OSL renders only in Cycles with Open Shading Language on" in labels  # factory settings: OSL off
+    else:
+        assert "not a Lamina material" in labels
