@@ -1,2 +1,3 @@
 """Lamina: research-grade layered materials for Cycles. The extension root delegates to ``addon``."""
-from .addon import register, unregister  # noqa: F401
+if __package__:  # Blender imports this folder as the extension package; test runners may import it bare
+    from .addon import register, unregister  # noqa: F401
