@@ -14,8 +14,9 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
   layer's scattering depth along ωo (``_layer_terms``), G_t Eq. 14 with the light leaving at cos θ = 1/2
   (``_slab_transmission``). [approx: translucent-lobe]
   Cycles' GGX refraction with IOR 1 evaluates exactly Eq. 13's form under lamps, but samples it as a
-  straight-through refraction: under environment light it renders as transparency (measured: furnace
-  albedo 1.0 instead of 0.15 for α = 0.3), so it is not used. Flakes' Schlick F is evaluated at h = n.
+  straight-through refraction: under environment light it renders as transparency (tests/blender/
+  test_cycles_facts.py), so it is not used. Flakes' Schlick F is evaluated at h = n in transmission, in both
+  forms. [approx: schlick-at-view]
 * hg layers (and fibers along n): Lambert reflection carrying γ · p_back · path · G_r likewise.
   [approx: lambert-hg]
 * attenuation by the layers above is ∏ τ_j(ωo)² for reflection (Sec. 4.3 with τ(ωi) ≈ τ(ωo)), and
@@ -72,7 +73,8 @@ APPROXIMATIONS = {
                                 "complex IOR's F0; not measured here (bpy 5.0)",
                                 {**_one(type="surface", roughness=0.3, thickness=0.1),
                                  "substrate": {"type": "conductor"}}),
-    "schlick-at-view": ("node group only: Schlick F at h = flake normal instead of per microfacet",
+    "schlick-at-view": ("Schlick F at h = flake normal, not per microfacet (node group reflection; both forms' "
+                        "transmission)",
                         _one(type="surface", roughness=0.3, thickness=1e4, f0=[0.2, 0.2, 0.2])),
 }
 
