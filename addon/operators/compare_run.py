@@ -98,7 +98,7 @@ def _json_entry(entry: dict, out_dir: str) -> dict:
 
 
 def scene_lines(entries: dict) -> list[str]:
-    return [f"{scene}: rel. RMSE {e['rel_rmse']:.2%} (mapping alone {e['mapping_rel_rmse']:.2%}), "
+    return [f"{scene}: RMSE {e['rmse']:.3g}, rel. RMSE {e['rel_rmse']:.2%} (mapping alone {e['mapping_rel_rmse']:.2%}), "
             f"Cycles {e['cycles_seconds']:.2f} s, reference {e['reference_seconds']:.2f} s"
             for scene, e in entries.items()]
 
