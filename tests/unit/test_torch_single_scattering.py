@@ -97,7 +97,7 @@ def test_gradcheck():
 
 def test_gradients_finite_at_extremes():
     rows = []
-    for kind, r in (("surface", 0.01), ("fiber", 0.2), ("hg", -0.7), ("surface", 1.0)):
+    for kind, r in (("surface", 0.01), ("fiber", 0.2), ("hg", -0.7), ("hg", 0.0), ("surface", 1.0)):
         for thickness in (1e4, 1e-3):
             rows.append((kind, r, (0.7, 0.8, 0.9), thickness, (0.1, 0.2, 0.3), (0.3, 0.1, 0.95)))
     top = rows
