@@ -242,14 +242,9 @@ def _fiber_along_n(thickness: float) -> dict:
 
 
 def _sheen_material(roughness: float):
-    import bpy
+    from .nodes.material import empty_material
 
-    mat = bpy.data.materials.new("Lamina bench sheen")
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
-    tree = mat.node_tree
-    tree.nodes.clear()
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    mat, tree, out = empty_material("Lamina bench sheen")
     sheen = tree.nodes.new("ShaderNodeBsdfSheen")
     sheen.distribution = "MICROFIBER"
     sheen.inputs["Roughness"].default_value = roughness

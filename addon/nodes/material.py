@@ -97,13 +97,27 @@ def osl_text(model_id: str, p) -> bpy.types.Text:
 # ------------------------------------------------------------------------------------------- material
 
 
+def empty_material(name: str):
+    """A new material whose node tree holds only a Material Output: (material, tree, output node)."""
+    mat = bpy.data.materials.new(name)
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    _clear(mat.node_tree)
+    return mat, mat.node_tree, mat.node_tree.nodes["Material Output"]
+
+
+def _clear(tree):
+    tree.nodes.clear()
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    out.name = "Material Output"
+    out.location = (300, 0)
+
+
 def new_material(model_id: str, p, form: str = "nodes", name: str | None = None) -> bpy.types.Material:
     """A new material (never an existing one overwritten) showing ``p`` in the chosen form."""
     if form not in FORMS:
         raise ValueError(f"unknown form {form!r}; expected one of {', '.join(FORMS)}")
-    mat = bpy.data.materials.new(name or f"{MODELS[model_id].LABEL}")
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
+    mat, _, _ = empty_material(name or MODELS[model_id].LABEL)
     mat["lamina"] = json.dumps({"model": model_id, "params": p.to_dict()})
     _build_tree(mat, model_id, p, form)
     return mat
@@ -153,9 +167,8 @@ def _build_tree(mat, model_id: str, p, form: str) -> None:
         text = osl_text(model_id, p)
         oso = osl.compile_source(text.as_string())
     tree = mat.node_tree
-    tree.nodes.clear()
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
-    out.location = (300, 0)
+    _clear(tree)
+    out = tree.nodes["Material Output"]
     if form == "nodes":
         node = tree.nodes.new("ShaderNodeGroup")
         node.node_tree = group

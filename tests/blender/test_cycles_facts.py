@@ -12,6 +12,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from addon.nodes import closures_np, osl  # noqa: E402
+from addon.nodes.material import empty_material  # noqa: E402
 from addon.operators.cycles_render import render_cycles  # noqa: E402
 from addon.reference import metrics  # noqa: E402
 from addon.reference import scenes as S  # noqa: E402
@@ -27,12 +28,7 @@ def clean_file():
 
 
 def _osl_material(closure: str):
-    mat = bpy.data.materials.new("fact")
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
-    tree = mat.node_tree
-    tree.nodes.clear()
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    mat, tree, out = empty_material("fact")
     node = tree.nodes.new("ShaderNodeScript")
     osl.load_into_script_node(node, osl.compile_source(SOURCE.format(closure)))
     tree.links.new(node.outputs["BSDF"], out.inputs["Surface"])

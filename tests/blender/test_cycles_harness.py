@@ -12,6 +12,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from addon.bake.exr import read_exr, read_png  # noqa: E402
+from addon.nodes.material import empty_material  # noqa: E402
 from addon.operators import compare_core  # noqa: E402
 from addon.operators.cycles_render import material_uses_osl, render_cycles  # noqa: E402
 from addon.reference import metrics as M  # noqa: E402
@@ -68,19 +69,8 @@ def ggx(ax, ay):
 
 # -------------------------------------------------------------------------------- materials
 
-def _empty_material(name):
-    """A new material with only a Material Output node: (material, node tree, output node)."""
-    m = bpy.data.materials.new(name)
-    if getattr(m, "node_tree", None) is None:
-        m.use_nodes = True
-    nt = m.node_tree
-    for n in list(nt.nodes):
-        nt.nodes.remove(n)
-    return m, nt, nt.nodes.new("ShaderNodeOutputMaterial")
-
-
 def _material(name, bl_idname, **inputs):
-    m, nt, out = _empty_material(name)
+    m, nt, out = empty_material(name)
     node = nt.nodes.new(bl_idname)
     for key, value in inputs.items():
         if key == "distribution":
@@ -178,7 +168,7 @@ def _osl_material(tmp_path, name, source, inputs=()):
     src.write_text(source)
     oso = tmp_path / f"{name}.oso"
     assert _cycles.osl_compile(str(src), str(oso))
-    m, nt, out = _empty_material(name)
+    m, nt, out = empty_material(name)
     script = nt.nodes.new("ShaderNodeScript")
     script.mode = "INTERNAL"
     code = oso.read_text()

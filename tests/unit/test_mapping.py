@@ -103,3 +103,30 @@ def test_every_named_approximation_is_declared_and_every_declared_one_is_used():
     assert tags == set(mapping.APPROXIMATIONS)
     for _, config in mapping.APPROXIMATIONS.values():
         assert model.validate(config).warnings == []
+
+
+@pytest.mark.parametrize("alpha", [0.01, 0.1, 0.3, 0.5, 0.8, 1.0])
+def test_downward_shares_match_the_sggx_phase_function(alpha):
+    """The shares of light along the normal scattered downwards, as the mapping states them, against
+    sampling the reference's SGGX phase function: surface flakes and fibers along n exactly, in-plane fibers
+    within 0.01 (the fitted form in _fiber_lobe)."""
+    from addon.reference import sggx
+
+    rng = np.random.default_rng(3)
+    n = 200_000
+    up = np.tile([0.0, 0.0, 1.0], (n, 1))
+
+    def sampled(s):
+        wo, _ = sggx.sample_phase(s, up, rng.random(n), rng.random(n))
+        return (wo[:, 2] < 0).mean()
+
+    normal = np.array([[0.0, 0.0, 1.0]])
+    shares = {}
+    for name, orientation in (("surface", [0, 0, 1]), ("fiber", [0, 0, 1]), ("fiber", [1, 0, 0])):
+        p = model.params_from_dict({"layers": [{"type": name, "roughness": alpha, "orientation": orientation}]})
+        b = expr.NumpyBackend(normal, mapping.input_values(p))
+        shares[(name, orientation[2])] = float(np.squeeze(mapping._layer_terms(b, 0, p.layers[0], 1.0)["p_down"]))
+    noise = 4 * np.sqrt(0.25 / n)
+    assert abs(shares[("surface", 1)] - sampled(sggx.surface(np.array([0.0, 0, 1]), alpha))) < noise
+    assert abs(shares[("fiber", 1)] - sampled(sggx.fiber(np.array([0.0, 0, 1]), alpha))) < noise
+    assert abs(shares[("fiber", 0)] - sampled(sggx.fiber(np.array([1.0, 0, 0]), alpha))) < 0.01 + noise
