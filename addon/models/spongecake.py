@@ -56,7 +56,10 @@ SUBSTRATE = {
 STACK = (
     Param("delta_transmission", "Delta transmission", "bool", False,
           description="Let unscattered light pass straight through the stack (Sec. 4.4)"),
+    Param("multiple_scattering", "Multiple scattering", "bool", False,
+          description="Add the network-predicted multiple-scattering lobes (Sec. 5; stacks of 1 or 2 layers)"),
 )
+MS_MAX_LAYERS = 2  # one network per layer count is trained and shipped (addon/bake/weights)
 
 
 @dataclass(frozen=True)
@@ -92,12 +95,14 @@ class Params:
     layers: tuple
     substrate: Substrate | None = None
     delta_transmission: bool = False
+    multiple_scattering: bool = False
 
     def to_dict(self) -> dict:
         return {
             "layers": [asdict(layer) for layer in self.layers],
             "substrate": None if self.substrate is None else _substrate_dict(self.substrate),
             "delta_transmission": self.delta_transmission,
+            "multiple_scattering": self.multiple_scattering,
         }
 
 
@@ -109,7 +114,8 @@ def validate(data: dict) -> Validated:
     """Clean a SpongeCake dict: clamp out-of-range numbers (with messages), refuse what cannot be clamped."""
     if not isinstance(data, dict):
         raise ParamError(f"spongecake: expected a dict, got {type(data).__name__}")
-    unknown = sorted(set(data) - {"layers", "substrate", "delta_transmission", "name", "description"})
+    stack_keys = tuple(p.name for p in STACK)
+    unknown = sorted(set(data) - {"layers", "substrate", "name", "description", *stack_keys})
     if unknown:
         raise ParamError(f"spongecake: unknown key(s) {', '.join(unknown)}")
     layers_in = data.get("layers") or []
@@ -118,8 +124,11 @@ def validate(data: dict) -> Validated:
     warnings: list[str] = []
     layers = tuple(_read_layer(d, i, warnings) for i, d in enumerate(layers_in))
     substrate = _read_substrate(data.get("substrate"), warnings)
-    stack = read_fields(STACK, {k: data[k] for k in ("delta_transmission",) if k in data}, "spongecake: ", warnings)
-    return Validated(Params(layers, substrate, stack["delta_transmission"]), warnings)
+    stack = read_fields(STACK, {k: data[k] for k in stack_keys if k in data}, "spongecake: ", warnings)
+    if stack["multiple_scattering"] and len(layers) > MS_MAX_LAYERS:
+        raise ParamError(f"spongecake: multiple scattering supports 1 or {MS_MAX_LAYERS} layers (one trained network "
+                         f"per layer count), got {len(layers)}; turn it off or merge layers")
+    return Validated(Params(layers, substrate, **stack), warnings)
 
 
 def params_from_dict(data: dict) -> Params:

@@ -139,7 +139,7 @@ def current_params(mat):
     node = shader_node(mat)
     if node is None:
         return model_id, p
-    values = {s.name: _read_socket(node, s) for s in MAPPINGS[model_id].sockets(p)}
+    values = {s.name: _read_socket(node, s) for s in MAPPINGS[model_id].sockets(p) if not s.baked}
     return model_id, _with_values(model_id, p, values)
 
 
@@ -204,6 +204,8 @@ def _read_socket(node, s):
 def _with_values(model_id: str, p, values: dict):
     data = p.to_dict()
     for s in MAPPINGS[model_id].sockets(p):
+        if s.baked:
+            continue
         target = data["substrate"] if s.layer is None else data["layers"][s.layer]
         target[s.param.name] = values[s.name]
     return MODELS[model_id].params_from_dict(data)

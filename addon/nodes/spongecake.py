@@ -30,7 +30,7 @@ the OSL form evaluates it per microfacet (generalized_schlick_bsdf).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..models import spongecake as model
 from ..models.params import Param
@@ -84,10 +84,14 @@ class Socket:
     name: str  # node-group socket name; OSL parameter name is its identifier form
     kind: str  # "float" | "color" | "vector"
     param: Param
-    layer: int | None  # 0-based layer index, None for the substrate
+    layer: int | None  # 0-based layer index, None for the substrate (or the MS weights)
+    group: str = ""  # interface panel; the layer's or the substrate's when empty
+    baked: bool = False  # written by Lamina's bake (network prediction), not a model parameter
 
     @property
     def panel(self) -> str:
+        if self.group:
+            return self.group
         return "Substrate" if self.layer is None else f"Layer {self.layer + 1}"
 
 
@@ -97,6 +101,7 @@ def structure_key(p: model.Params) -> tuple:
         tuple((layer.type, layer.has_fresnel) for layer in p.layers),
         None if p.substrate is None else p.substrate.type,
         p.delta_transmission,
+        p.multiple_scattering,
     )
 
 
@@ -114,27 +119,89 @@ def sockets(p: model.Params) -> list[Socket]:
     out = []
     for k, layer in enumerate(p.layers):
         for prm in _layer_params(layer):
-            label = "Mean Cosine g" if (prm.name == "roughness" and not layer.is_flake) else prm.label
-            out.append(Socket(f"L{k + 1} {label}", prm.kind, prm, k))
+            out.append(Socket(f"L{k + 1} {_label(layer, prm)}", prm.kind, prm, k))
     if p.substrate is not None:
         for prm in model.SUBSTRATE[p.substrate.type]:
             out.append(Socket(f"Substrate {prm.label}", prm.kind, prm, None))
+    if p.multiple_scattering:
+        out += _ms_sockets(p)
+    return out
+
+
+def _label(layer: model.Layer, prm: Param) -> str:
+    return "Mean Cosine g" if (prm.name == "roughness" and not layer.is_flake) else prm.label
+
+
+MS_PREFIX = "MS "
+MS_PANEL = "Multiple Scattering"
+MS_WEIGHTS = (
+    Param("reflection", "Reflection", "float", 0.0, 0.0, None, texturable=True,
+          description="Baked weight W2r of the Lambertian multiple-scattering lobe on the light's side"),
+    Param("transmission", "Transmission", "float", 0.0, 0.0, None, texturable=True,
+          description="Baked weight W2t of the Lambertian multiple-scattering lobe on the far side"),
+)
+
+
+def _ms_sockets(p: model.Params) -> list[Socket]:
+    """Baked by Lamina (addon/bake): the extra lobe's layer parameters (W1 folded into the albedo) and the
+    Lambert weights. Every one can be driven by a baked texture."""
+    out = []
+    for k, layer in enumerate(p.layers):
+        for prm in _layer_params(layer):
+            baked = replace(prm, max=None if prm.name == "albedo" else prm.max, texturable=True,
+                            description="Baked multiple-scattering lobe: " + prm.description)
+            out.append(Socket(f"{MS_PREFIX}L{k + 1} {_label(layer, prm)}", prm.kind, baked, k, MS_PANEL, True))
+    weights = MS_WEIGHTS if p.substrate is None else MS_WEIGHTS[:1]
+    out += [Socket(MS_PREFIX + prm.label, prm.kind, prm, None, MS_PANEL, True) for prm in weights]
     return out
 
 
 def input_values(p: model.Params) -> dict:
-    """Socket name → value for these parameters (what the material's group node or script node is set to)."""
+    """Socket name → value for these parameters (what the material's group node or script node is set to);
+    with multiple scattering, the network's prediction baked as constants."""
     values = {}
     for s in sockets(p):
+        if s.baked:
+            continue
         source = p.substrate if s.layer is None else p.layers[s.layer]
         values[s.name] = getattr(source, s.param.name)
+    if p.multiple_scattering:
+        values.update(ms_values(p))
+    return values
+
+
+def ms_values(p: model.Params) -> dict:
+    """The ``MS`` socket values of the network's prediction for light from above (addon.bake.spongecake)."""
+    from ..bake.spongecake import predict
+
+    pred = predict(p)
+    weights = {"reflection": pred.reflection, "transmission": pred.transmission}
+    values = {}
+    for s in _ms_sockets(p):
+        if s.layer is None:
+            values[s.name] = weights[s.param.name]
+        else:
+            values[s.name] = getattr(pred.lobe.layers[s.layer], s.param.name)
     return values
 
 
 def shade(b, p: model.Params) -> None:
     """Build the closure mix for the stack structure of ``p`` on backend ``b`` (see module docstring)."""
     mu = b.cos_view()
-    terms = [_layer_terms(b, k, layer, mu) for k, layer in enumerate(p.layers)]
+    terms = _layers(b, p, mu, "")
+    stack = _prod(*[t["tau"] for t in terms])
+    if p.substrate is not None:
+        exit_ = stack if p.substrate.type != "diffuse" else _prod(*[t["tau_exit"] for t in terms])
+        _substrate(b, p.substrate, stack * exit_)
+    if p.delta_transmission:
+        b.transparent(b.scale((1.0, 1.0, 1.0), stack))
+    if p.multiple_scattering:
+        _multiple_scattering(b, p, mu)
+
+
+def _layers(b, p: model.Params, mu, prefix: str) -> list[dict]:
+    """Each layer's closures (inputs named ``prefix + "L<k> ..."``); returns the per-layer terms."""
+    terms = [_layer_terms(b, prefix + f"L{k + 1} ", layer, mu) for k, layer in enumerate(p.layers)]
     taus = [t["tau"] for t in terms]
     for k, (layer, t) in enumerate(zip(p.layers, terms)):
         above = _prod(*taus[:k]) if k else None
@@ -151,12 +218,16 @@ def shade(b, p: model.Params) -> None:
             b.diffuse(b.scale(t["albedo"], _prod(diffuse, above, above)))
         if p.substrate is None:  # a substrate closes the stack (reference convention)
             b.translucent(transmitted)
-    stack = _prod(*taus)
-    if p.substrate is not None:
-        exit_ = stack if p.substrate.type != "diffuse" else _prod(*[t["tau_exit"] for t in terms])
-        _substrate(b, p.substrate, stack * exit_)
-    if p.delta_transmission:
-        b.transparent(b.scale((1.0, 1.0, 1.0), stack))
+    return terms
+
+
+def _multiple_scattering(b, p: model.Params, mu) -> None:
+    """Sec. 5: the network's extra single-scattering lobe (its parameters baked into the ``MS`` inputs, W1 in
+    the albedo), mapped like the layers themselves, plus the Lambert lobes W2r / π and W2t / π (exact)."""
+    _layers(b, p, mu, MS_PREFIX)
+    b.diffuse(b.scale((1.0, 1.0, 1.0), b.input(MS_PREFIX + "Reflection", "float")))
+    if p.substrate is None:
+        b.translucent(b.scale((1.0, 1.0, 1.0), b.input(MS_PREFIX + "Transmission", "float")))
 
 
 def _slab_transmission(b, t):
@@ -176,8 +247,7 @@ def _slab_reflection(b, t):
     return (1.0 - b.exp(-s)) / b.maximum(s, 1e-12)
 
 
-def _layer_terms(b, k: int, layer: model.Layer, mu) -> dict:
-    name = f"L{k + 1} "
+def _layer_terms(b, name: str, layer: model.Layer, mu) -> dict:
     rough = b.input(name + ("Roughness" if layer.is_flake else "Mean Cosine g"), "float")
     t = {"albedo": b.input(name + "Albedo", "color")}
     thickness = b.input(name + "Thickness", "float")

@@ -15,6 +15,8 @@ Conventions (local frame, z = macro normal; ``wi`` points to the light, ``wo`` t
   (transmitted throughput integrates to 1 - F; f(i, o) / eta_o^2 = f(o, i) / eta_i^2).
 * Delta transmission is a Dirac along -wi with weight prod_k tau_k(wi), only when the flag is on and there is
   no substrate (every substrate blocks or refracts it); it is not part of ``eval`` or ``pdf``.
+* With ``multiple_scattering``, ``eval`` adds the network's two lobes (Sec. 5) and ``sample``/``pdf`` still
+  sample single scattering only, as the paper does (Sec. 4.5); the sample weight uses the full f.
 * Sampling picks a lobe with P(first collision in layer k) = (1 - tau_k(wi)) prod_{j between} tau_j(wi), the
   substrate (or the Dirac) with prod_k tau_k(wi), renormalised (uniform over the continuous lobes when all
   vanish, where f = 0 anyway). ``pdf`` is the exact density of the continuous samples; a Dirac sample has
@@ -31,7 +33,7 @@ from . import hg, microfacet, sggx
 from .frames import as_directions, dot, spherical
 
 __all__ = ["Params", "Sample", "params_from_dict", "eval", "pdf", "sample", "delta_transmittance",
-           "directional_albedo", "furnace_albedo", "ground_truth"]
+           "directional_albedo", "furnace_albedo", "ground_truth", "ground_truth_albedo"]
 
 
 class Sample(NamedTuple):
@@ -185,9 +187,14 @@ def _substrate_eval(params: Params, wi, wo):
 # ---------------------------------------------------------------------------------------------- public
 
 def eval(params: Params, wi, wo):
-    """SpongeCake single-scattering BSDF f(wi, wo) (N, 3), reflection and transmission, no cosine, no Dirac."""
+    """SpongeCake BSDF f(wi, wo) (N, 3), reflection and transmission, no cosine, no Dirac: single scattering,
+    plus the network's multiple-scattering lobes (``addon.bake.spongecake``) when ``params.multiple_scattering``."""
     wi, wo = as_directions(wi), as_directions(wo)
     f = _stack_eval(params, wi, wo) + _substrate_eval(params, wi, wo)
+    if params.multiple_scattering:
+        from ..bake.spongecake import eval_multiple
+
+        f = f + eval_multiple(params, wi, wo)
     return np.where(((wi[:, 2] != 0) & (wo[:, 2] != 0))[:, None], f, 0.0)
 
 
@@ -444,3 +451,39 @@ def ground_truth(params: Params, wi, wo, n_paths: int = 20000, seed: int = 0, ma
         if depth + 1 < max_depth:
             state = _scatter(params, state, rng)
     return tuple(s / n_paths for s in sums)
+
+
+def ground_truth_albedo(params: Params, wo, n_paths: int = 20000, seed: int = 0, max_depth: int = 64):
+    """Independent Monte Carlo furnace albedo: the energy leaving the stack for unit light arriving from each
+    wo (by reciprocity, what a white furnace shows towards wo), split into (unscattered, order 1, orders >= 2),
+    each (N, 3). The same random walk as ``ground_truth``, tallying escaping throughput instead of next-event
+    estimation; the unscattered part is what ``delta_transmittance`` describes (count it only with the flag)."""
+    wo = as_directions(wo)
+    tallies = [np.zeros((len(wo), 3)) for _ in range(3)]
+    rng = np.random.default_rng(seed)
+    n_layers = len(params.layers)
+    group = np.repeat(np.arange(len(wo)), n_paths)
+    d = -wo[group]
+    from_below = d[:, 2] > 0
+    z = np.where(from_below, float(n_layers), 0.0)
+    surface = from_below & (params.substrate is not None)
+    state = (z, d, np.ones((len(z), 3)), np.zeros(len(z), int), surface, group)
+    for depth in range(max_depth):
+        z, d, beta, layer, surface, group = state
+        fly = ~surface
+        z_f, layer_f, collided = _free_flight(params, z[fly], d[fly], rng)
+        z[fly], layer[fly] = z_f, layer_f
+        reach_substrate = np.zeros_like(surface)
+        if params.substrate is not None:
+            reach_substrate[fly] = ~collided & (d[fly, 2] < 0)
+        escaped = np.zeros_like(surface)
+        escaped[fly] = ~collided & ~reach_substrate[fly]
+        for c in range(3):
+            tallies[min(depth, 2)][:, c] += np.bincount(group[escaped], weights=beta[escaped, c], minlength=len(wo))
+        alive = surface | reach_substrate
+        alive[fly] |= collided
+        state = tuple(a[alive] for a in (z, d, beta, layer, surface | reach_substrate, group))
+        if len(state[0]) == 0 or depth + 1 == max_depth:
+            break
+        state = _scatter(params, state, rng)
+    return tuple(t / n_paths for t in tallies)

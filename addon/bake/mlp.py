@@ -1,0 +1,59 @@
+"""Numpy inference of the small MLPs trained in ``training/`` (Blender ships no torch).
+
+A weights file is an .npz with ``w0, b0, w1, b1, ...`` (``w`` of shape (inputs, outputs)) and a JSON
+``manifest`` string (training data size, seed, validation errors, code version). Hidden layers use SiLU,
+x·sigmoid(x), the activation the training code uses; the last layer is linear.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+
+def silu(x):
+    return x / (1.0 + np.exp(-np.clip(x, -60.0, 60.0)))
+
+
+@dataclass(frozen=True)
+class MLP:
+    weights: tuple
+    biases: tuple
+    manifest: dict
+
+    @property
+    def n_inputs(self) -> int:
+        return self.weights[0].shape[0]
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        h = np.asarray(x, dtype=np.float64)
+        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+            h = h @ w + b
+            if i + 1 < len(self.weights):
+                h = silu(h)
+        return h
+
+
+def save(path, weights, biases, manifest: dict) -> None:
+    from .exr import atomic_path
+
+    arrays = {f"w{i}": np.asarray(w, np.float32) for i, w in enumerate(weights)}
+    arrays.update({f"b{i}": np.asarray(b, np.float32) for i, b in enumerate(biases)})
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, manifest=np.array(json.dumps(manifest)), **arrays)
+
+
+@lru_cache(maxsize=8)
+def load(path) -> MLP:
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"network weights {path} are missing: reinstall Lamina or run training/train.py")
+    with np.load(path) as data:
+        n = sum(1 for k in data.files if k.startswith("w"))
+        weights = tuple(data[f"w{i}"].astype(np.float64) for i in range(n))
+        biases = tuple(data[f"b{i}"].astype(np.float64) for i in range(n))
+        manifest = json.loads(str(data["manifest"]))
+    return MLP(weights, biases, manifest)

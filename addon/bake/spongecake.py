@@ -1,0 +1,184 @@
+"""SpongeCake multiple scattering (Wang et al. 2022, Sec. 5): network inputs, outputs and numpy inference.
+
+The multiple-scattering part of f for a stack of 1 or 2 layers (no substrate, light from above) is modelled as
+
+    f_ms(wi, wo) = W1 f_ss(params', wi, wo) + W2r / pi [wi, wo on one side] + W2t / pi [opposite sides]
+
+where params' has the same layer types, count and Fresnel structure as params. The paper's single
+Lambertian weight W2 is split into reflection and transmission weights, because a thick layer sends far more
+multiply scattered light back than through. Light from below is the prediction for the flipped stack.
+W1 is folded into the lobe's albedo (f_ss is linear in it), so a prediction is a lobe ``Params`` plus (W2r, W2t).
+
+Encoding (per layer, ``FEATURES`` = 14 inputs): type one-hot (3); roughness as log alpha mapped from
+[0.01, 1] to [-1, 1] for flakes, g / 0.95 for hg; 2 albedo - 1 (3); log T rho mapped from [0.01, 10] to [-1, 1];
+2 f0 - 1 (3); orientation with z >= 0 (3; zero for hg). Inputs beyond the training ranges are clamped.
+Decoding (per layer, ``OUTPUTS`` = 11 raw values, then 3 for the weights): alpha' log-sigmoid in [0.01, 1]
+(g' = 0.95 tanh for hg), albedo' sigmoid, T rho' log-sigmoid in [0.01, 20], f0' sigmoid (1 for layers without
+Fresnel), orientation' = normalize(orientation + tanh(.)), W = softplus(.). ``decode`` is written against an
+array namespace so training (torch) and inference (numpy) share it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from ..models import spongecake as model
+from . import layer_rows as rows_
+from . import mlp
+
+WEIGHTS = Path(__file__).parent / "weights"
+FEATURES = 14
+OUTPUTS = 11
+WEIGHT_OUTPUTS = 3  # W1, W2r, W2t
+ALPHA_RANGE = (0.01, 1.0)
+G_MAX = 0.95
+THICKNESS_IN = (0.01, 10.0)
+THICKNESS_OUT = (0.01, 20.0)
+
+
+def weights_path(n_layers: int) -> Path:
+    return WEIGHTS / f"spongecake_ms_{n_layers}layer.npz"
+
+
+def network(n_layers: int) -> mlp.MLP:
+    if not 1 <= n_layers <= model.MS_MAX_LAYERS:
+        raise ValueError(f"multiple scattering supports 1 or {model.MS_MAX_LAYERS} layers, got {n_layers}")
+    return mlp.load(weights_path(n_layers))
+
+
+# ------------------------------------------------------------------------------------------- encoding
+
+def _log_unit(x, lo, hi, xp=np):
+    """log x mapped from [lo, hi] to [-1, 1] (clamped)."""
+    t = (xp.log(xp.clip(x, lo, hi)) - math.log(lo)) / (math.log(hi) - math.log(lo))
+    return 2.0 * t - 1.0
+
+
+def features(rows: np.ndarray) -> np.ndarray:
+    """(N, L, ROW) layer rows → (N, L * FEATURES) network inputs (see the module docstring)."""
+    rows = np.asarray(rows, dtype=np.float64)
+    kind = np.rint(rows[..., rows_.TYPE]).astype(int)
+    is_hg = kind == 2
+    one_hot = np.eye(3)[kind]
+    rough = np.where(is_hg, np.clip(rows[..., rows_.ROUGHNESS] / G_MAX, -1.0, 1.0),
+                     _log_unit(rows[..., rows_.ROUGHNESS], *ALPHA_RANGE))
+    orientation = rows[..., rows_.ORIENTATION] * np.where(rows[..., rows_.ORIENTATION.stop - 1:] < 0, -1.0, 1.0)
+    orientation = np.where(is_hg[..., None], 0.0, orientation)
+    parts = [one_hot, rough[..., None], 2.0 * rows[..., rows_.ALBEDO] - 1.0,
+             _log_unit(np.maximum(rows[..., rows_.THICKNESS], 1e-12), *THICKNESS_IN)[..., None],
+             2.0 * rows[..., rows_.F0] - 1.0, orientation]
+    x = np.concatenate(parts, axis=-1)
+    return x.reshape(x.shape[0], -1)
+
+
+# ------------------------------------------------------------------------------------------- decoding
+
+class NumpyOps:
+    exp, tanh, sqrt, log = np.exp, np.tanh, np.sqrt, np.log
+    where = staticmethod(np.where)
+
+    @staticmethod
+    def sigmoid(x):
+        return 0.5 * (1.0 + np.tanh(0.5 * x))
+
+    @staticmethod
+    def softplus(x):
+        return np.logaddexp(x, 0.0)
+
+    @staticmethod
+    def any_last(x):
+        return x.any(axis=-1, keepdims=True)
+
+    @staticmethod
+    def sum_last(x):
+        return x.sum(axis=-1, keepdims=True)
+
+    @staticmethod
+    def stack(parts, axis):
+        return np.stack(parts, axis=axis)
+
+    @staticmethod
+    def concat(parts, axis):
+        return np.concatenate(parts, axis=axis)
+
+
+def _log_sigmoid_range(x, lo, hi, ops):
+    return ops.exp(math.log(lo) + ops.sigmoid(x) * (math.log(hi) - math.log(lo)))
+
+
+def decode(raw, rows, ops=NumpyOps):
+    """Raw network outputs (N, L * OUTPUTS + 3) and the input rows (N, L, ROW) → (lobe rows (N, L, ROW) with W1
+    folded into the albedo, weights (N, 2) = (W2r, W2t)). ``ops`` is the array namespace (numpy or torch)."""
+    n_layers = rows.shape[1]
+    layers = []
+    weights = ops.softplus(raw[:, n_layers * OUTPUTS:])
+    for k in range(n_layers):
+        r = raw[:, k * OUTPUTS:(k + 1) * OUTPUTS]
+        row = rows[:, k]
+        kind = row[:, rows_.TYPE:rows_.TYPE + 1]
+        is_hg = kind > 1.5
+        rough = ops.where(is_hg, G_MAX * ops.tanh(r[:, 0:1]), _log_sigmoid_range(r[:, 0:1], *ALPHA_RANGE, ops))
+        albedo = ops.sigmoid(r[:, 1:4]) * weights[:, 0:1]
+        thickness = _log_sigmoid_range(r[:, 4:5], *THICKNESS_OUT, ops)
+        has_fresnel = ops.any_last(row[:, rows_.F0] < 1.0) & ~is_hg
+        f0 = ops.where(has_fresnel, ops.sigmoid(r[:, 5:8]), 1.0 + 0.0 * r[:, 5:8])
+        o = row[:, rows_.ORIENTATION] + ops.tanh(r[:, 8:11])
+        o = o / ops.sqrt(ops.sum_last(o * o) + 1e-12)
+        layers.append(ops.concat([kind, rough, albedo, thickness, f0, o], axis=1))
+    return ops.stack(layers, axis=1), weights[:, 1:3]
+
+
+# ------------------------------------------------------------------------------------------ inference
+
+def predict_rows(rows: np.ndarray):
+    """Per row set (N, L, ROW) with light from above: (lobe rows (N, L, ROW), (N, 2) Lambert weights)."""
+    rows = np.asarray(rows, dtype=np.float64)
+    net = network(rows.shape[1])
+    return decode(net(features(rows)), rows)
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """The multiple-scattering lobes of one stack for light from above and from below (the flipped stack)."""
+
+    lobe: model.Params
+    reflection: float  # W2r
+    transmission: float  # W2t
+    lobe_below: model.Params
+    reflection_below: float
+    transmission_below: float
+
+
+@lru_cache(maxsize=256)
+def predict(params: model.Params) -> Prediction:
+    if len(params.layers) > model.MS_MAX_LAYERS:
+        raise ValueError(f"multiple scattering supports 1 or {model.MS_MAX_LAYERS} layers, got {len(params.layers)}")
+    rows = rows_.stack_rows(params)
+    lobes, weights = predict_rows(np.stack([rows, rows_.flipped(rows)]))
+    above = rows_.params_from_rows(lobes[0])
+    below = rows_.params_from_rows(rows_.flipped(lobes[1]))
+    return Prediction(above, float(weights[0, 0]), float(weights[0, 1]),
+                      below, float(weights[1, 0]), float(weights[1, 1]))
+
+
+def eval_multiple(params: model.Params, wi: np.ndarray, wo: np.ndarray, prediction: Prediction | None = None):
+    """The predicted multiple-scattering part of f(wi, wo), (N, 3), no cosine. With a substrate, the layers' own
+    prediction (trained without one) closes at the substrate: reflection above only (the "ms-over-substrate"
+    approximation, measured against the random walk in docs/accuracy.md)."""
+    from ..reference import spongecake as reference
+
+    pred = prediction or predict(params)
+    up_i = wi[:, 2] > 0
+    same = (wi[:, 2] > 0) == (wo[:, 2] > 0)
+    f = np.where(up_i[:, None], reference.eval(pred.lobe, wi, wo), reference.eval(pred.lobe_below, wi, wo))
+    w2r = np.where(up_i, pred.reflection, pred.reflection_below)
+    w2t = np.where(up_i, pred.transmission, pred.transmission_below)
+    f = f + (np.where(same, w2r, w2t) / np.pi)[:, None]
+    if params.substrate is not None:
+        f = f * ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
+    grazing = (wi[:, 2] == 0) | (wo[:, 2] == 0)
+    return np.where(grazing[:, None], 0.0, f)

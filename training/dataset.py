@@ -1,0 +1,224 @@
+"""Monte Carlo dataset of SpongeCake multiple scattering (Wang et al. 2022, Sec. 5 "Dataset").
+
+For random 1- and 2-layer stacks (no substrate), the reference's independent random walk
+(``addon.reference.spongecake.ground_truth``) estimates the order >= 2 part of f(wi, wo) on jittered
+stratified directions: ``wi`` over the upper hemisphere, ``wo`` over the whole sphere (reflection and
+transmission), both uniform in solid angle so grazing angles are covered (as in the paper). Light from below is
+the flipped stack (``addon.bake.layer_rows.flipped``), so it needs no data of its own.
+
+Each shard is a seeded, self-contained .npz written atomically into the cache folder (outside the repository);
+re-running skips the shards already there, so an interrupted run resumes. Every configuration is simulated as
+two independent halves, which gives its Monte Carlo noise for free: the standard error of the stored mean is
+|a - b| / 2 per pair (``noise`` below).
+
+    python -m training.dataset --layers 1 2 --configs 1500 3000            # the documented default (hours)
+    python -m training.dataset --quick --out /tmp/lamina-quick             # seconds, for tests
+
+Shard arrays: ``rows`` (C, L, 12) layer rows, ``wi`` (C, n_wi, 3), ``wo`` (C, n_wo, 3), ``ms`` (C, n_wi, n_wo, 3)
+the order >= 2 estimate of f (no cosine), ``ms_half_diff`` the same for a - b, ``ss`` the walk's order 1.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from dataclasses import asdict, dataclass
+from multiprocessing import Pool
+from pathlib import Path
+
+import numpy as np
+
+from addon.bake import layer_rows
+from addon.bake.exr import atomic_path
+from addon.reference import spongecake as reference
+from addon.reference.frames import spherical
+
+VERSION = 1
+DEFAULT_CACHE = Path(os.environ.get("LAMINA_CACHE", Path.home() / ".cache" / "lamina")) / "spongecake-ms"
+
+# Parameter ranges of the training data (what the network has seen; inputs outside are clamped to them).
+ROUGHNESS_RANGE = (0.01, 1.0)  # flake alpha, log-uniform
+G_RANGE = (-0.95, 0.95)  # hg mean cosine, uniform
+THICKNESS_RANGE = (0.01, 10.0)  # optical thickness T rho, log-uniform
+TYPE_SHARES = (0.4, 0.4, 0.2)  # surface, fiber, hg
+
+
+@dataclass(frozen=True)
+class Size:
+    configs: int
+    shard: int = 25
+    n_wi: int = 16  # a square number: cos-theta x azimuth strata
+    n_wo: int = 128  # twice a square number: per hemisphere
+    paths: int = 4000  # per wi, both halves together
+    max_depth: int = 64
+
+
+QUICK = Size(configs=8, shard=4, n_wi=4, n_wo=32, paths=200)
+
+
+# ------------------------------------------------------------------------------------------ parameters
+
+def sample_layers(rng: np.random.Generator, n: int, n_layers: int) -> np.ndarray:
+    """(n, n_layers, ROW) random layer rows from the training distribution."""
+    rows = np.zeros((n, n_layers, layer_rows.ROW))
+    for k in range(n_layers):
+        rows[:, k] = _sample_layer(rng, n)
+    return rows
+
+
+def _sample_layer(rng, n) -> np.ndarray:
+    row = np.zeros((n, layer_rows.ROW))
+    kind = rng.choice(3, size=n, p=TYPE_SHARES)
+    row[:, layer_rows.TYPE] = kind
+    log_lo, log_hi = np.log(ROUGHNESS_RANGE)
+    alpha = np.exp(rng.uniform(log_lo, log_hi, n))
+    row[:, layer_rows.ROUGHNESS] = np.where(kind == 2, rng.uniform(*G_RANGE, n), alpha)
+    # half the channels uniform, half pushed towards 1 where multiple scattering matters most
+    uniform = rng.random((n, 3))
+    bright = 1.0 - rng.random((n, 3)) ** 2
+    row[:, layer_rows.ALBEDO] = np.where(rng.random((n, 1)) < 0.5, uniform, bright)
+    row[:, layer_rows.THICKNESS] = np.exp(rng.uniform(*np.log(THICKNESS_RANGE), n))
+    grey = rng.uniform(0.02, 1.0, (n, 1)) * np.ones(3)
+    f0 = np.select([rng.random((n, 1)) < 0.6, rng.random((n, 1)) < 0.75], [np.ones(3), grey],
+                   rng.uniform(0.02, 1.0, (n, 3)))
+    row[:, layer_rows.F0] = f0
+    row[:, layer_rows.ORIENTATION] = _sample_orientation(rng, kind)
+    return row
+
+
+def _sample_orientation(rng, kind) -> np.ndarray:
+    """Surface flakes: half along the normal, half tilted; fibers: in-plane, along the normal or tilted.
+    Upper hemisphere only (the SGGX matrix of -w is that of w)."""
+    n = len(kind)
+    tilted = spherical(rng.random(n), 2.0 * np.pi * rng.random(n))
+    in_plane = spherical(np.zeros(n), 2.0 * np.pi * rng.random(n))
+    normal = np.tile([0.0, 0.0, 1.0], (n, 1))
+    u = rng.random((n, 1))
+    surface = np.where(u < 0.5, normal, tilted)
+    fiber = np.where(u < 0.4, in_plane, np.where(u < 0.6, normal, tilted))
+    return np.where((kind == 1)[:, None], fiber, surface)
+
+
+# ------------------------------------------------------------------------------------------ directions
+
+def stratified_hemisphere(rng, n: int) -> np.ndarray:
+    """n (a square) jittered directions uniform in solid angle over the upper hemisphere."""
+    side = int(round(np.sqrt(n)))
+    i, j = np.divmod(np.arange(side * side), side)
+    cos_theta = 1.0 - (i + rng.random(side * side)) / side
+    phi = 2.0 * np.pi * (j + rng.random(side * side)) / side
+    return spherical(np.maximum(cos_theta, 1e-3), phi)
+
+
+def stratified_sphere(rng, n: int) -> np.ndarray:
+    upper = stratified_hemisphere(rng, n // 2)
+    lower = stratified_hemisphere(rng, n // 2) * np.array([1.0, 1.0, -1.0])
+    return np.concatenate([upper, lower])
+
+
+# ------------------------------------------------------------------------------------------ simulation
+
+def simulate(rows: np.ndarray, wi: np.ndarray, wo: np.ndarray, size: Size, seed: int):
+    """(ms, ms_half_diff, ss) of one stack, each (n_wi, n_wo, 3), from two independent halves of the paths."""
+    params = layer_rows.params_from_rows(rows)
+    big_wi = np.repeat(wi, len(wo), axis=0)
+    big_wo = np.tile(wo, (len(wi), 1))
+    halves = [reference.ground_truth(params, big_wi, big_wo, n_paths=size.paths // 2, seed=seed + h,
+                                     max_depth=size.max_depth) for h in (0, 1)]
+    shape = (len(wi), len(wo), 3)
+    ss = 0.5 * (halves[0][0] + halves[1][0])
+    ms = 0.5 * (halves[0][1] + halves[1][1])
+    return ms.reshape(shape), (0.5 * (halves[0][1] - halves[1][1])).reshape(shape), ss.reshape(shape)
+
+
+def shard_path(out: Path, n_layers: int, index: int) -> Path:
+    return out / f"layers{n_layers}" / f"shard{index:04d}.npz"
+
+
+def make_shard(job) -> str:
+    out, n_layers, index, size, base_seed = job
+    path = shard_path(out, n_layers, index)
+    if path.exists():
+        return f"{path.name} (cached)"
+    seq = np.random.SeedSequence([base_seed, n_layers, index])
+    rng = np.random.default_rng(seq)
+    rows = sample_layers(rng, size.shard, n_layers)
+    wi = np.stack([stratified_hemisphere(rng, size.n_wi) for _ in range(size.shard)])
+    wo = np.stack([stratified_sphere(rng, size.n_wo) for _ in range(size.shard)])
+    walk_seeds = rng.integers(0, 2**31, size.shard)
+    results = [simulate(rows[c], wi[c], wo[c], size, int(walk_seeds[c])) for c in range(size.shard)]
+    ms, diff, ss = (np.stack([r[i] for r in results]).astype(np.float32) for i in range(3))
+    meta = {"version": VERSION, "seed": base_seed, "layers": n_layers, "shard": index, **asdict(size)}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            np.savez_compressed(f, rows=rows, wi=wi, wo=wo, ms=ms, ms_half_diff=diff, ss=ss,
+                                meta=np.array(json.dumps(meta)))
+    return path.name
+
+
+ARRAYS = ("rows", "wi", "wo", "ms", "ms_half_diff", "ss")
+
+
+def load(out: Path, n_layers: int) -> dict:
+    """All shards of one layer count concatenated (arrays as in the module docstring, plus ``meta``)."""
+    files = sorted((Path(out) / f"layers{n_layers}").glob("shard*.npz"))
+    if not files:
+        raise FileNotFoundError(f"no {n_layers}-layer shards in {out}: run python -m training.dataset first")
+    parts = [dict(np.load(f)) for f in files]
+    data = {k: np.concatenate([p[k] for p in parts]) for k in ARRAYS}
+    data["meta"] = [json.loads(str(p["meta"])) for p in parts]
+    return data
+
+
+def noise(data: dict) -> dict:
+    """Monte Carlo noise of the stored estimates: relative standard error of the mean of f |cos wo| per pair
+    (RMS over pairs with signal, relative to the mean signal), and the walk's order 1 against the closed form."""
+    cos_o = np.abs(data["wo"][:, None, :, 2:3])
+    signal = np.mean(data["ms"] * cos_o)
+    se = np.sqrt(np.mean((data["ms_half_diff"] * cos_o) ** 2))
+    ss_err = []
+    for c in range(min(len(data["rows"]), 64)):
+        params = layer_rows.params_from_rows(data["rows"][c])
+        wi, wo = data["wi"][c].astype(float), data["wo"][c].astype(float)
+        exact = reference.eval(params, np.repeat(wi, len(wo), 0), np.tile(wo, (len(wi), 1))).reshape(data["ss"][c].shape)
+        ss_err.append(np.mean(np.abs(data["ss"][c] - exact) * cos_o[c]) / max(np.mean(exact * cos_o[c]), 1e-12))
+    return {"configs": int(len(data["rows"])), "ms_mean": float(signal), "ms_relative_se": float(se / signal),
+            "order1_relative_mae": float(np.mean(ss_err))}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m training.dataset", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, default=DEFAULT_CACHE, help=f"cache folder (default {DEFAULT_CACHE})")
+    ap.add_argument("--layers", type=int, nargs="+", default=[1, 2], choices=[1, 2])
+    ap.add_argument("--configs", type=int, nargs="+", default=[1500, 3000], help="configurations per layer count")
+    ap.add_argument("--paths", type=int, default=Size.paths, help="random-walk paths per wi")
+    ap.add_argument("--n-wi", type=int, default=Size.n_wi)
+    ap.add_argument("--n-wo", type=int, default=Size.n_wo)
+    ap.add_argument("--shard", type=int, default=Size.shard, help="configurations per shard file")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--quick", action="store_true", help="a tiny dataset for tests (seconds)")
+    ap.add_argument("--noise", action="store_true", help="report the Monte Carlo noise of what is in --out")
+    a = ap.parse_args(argv)
+    if a.noise:
+        for n_layers in a.layers:
+            print(json.dumps({"layers": n_layers, **noise(load(a.out, n_layers))}))
+        return 0
+    configs = dict(zip(a.layers, a.configs if len(a.configs) == len(a.layers) else a.configs[:1] * len(a.layers)))
+    jobs = []
+    for n_layers in a.layers:
+        size = QUICK if a.quick else Size(configs[n_layers], a.shard, a.n_wi, a.n_wo, a.paths)
+        jobs += [(a.out, n_layers, i, size, a.seed) for i in range(-(-size.configs // size.shard))]
+    jobs.sort(key=lambda j: (j[2], j[1]))  # interleave layer counts so a partial run has both
+    start = time.time()
+    with Pool(max(1, a.workers)) as pool:
+        for done, name in enumerate(pool.imap(make_shard, jobs), 1):
+            print(f"[{done}/{len(jobs)}] {name}  {time.time() - start:.0f} s", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

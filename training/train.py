@@ -1,0 +1,233 @@
+"""Train the SpongeCake multiple-scattering networks (Wang et al. 2022, Sec. 5 "Training") and export them.
+
+One MLP per layer count: ``L * FEATURES`` inputs, three hidden layers of 128 SiLU units, ``L * OUTPUTS + 3``
+outputs (``addon.bake.spongecake`` documents the encoding). SiLU rather than ReLU: the predicted parameters
+are then smooth (C-infinity) functions of the layer parameters, so texture-driven bakes vary smoothly between
+texels, and no unit dies on a small dataset. Loss: MAE between the Monte Carlo multiple-scattering lobe and
+W1 f_ss(params') + W2 / pi, both times |cos wo| (the differentiable ``training.spongecake_torch.eval_stack``),
+Adam, learning rate 1e-3 with cosine decay, mini-batches of 32 configurations (every direction pair of a
+configuration in the same batch). 10% of the configurations are held out for validation; the shipped,
+independently seeded validation set (tests/data) is scored at export and its errors go into the manifest.
+
+    python -m training.train --data ~/.cache/lamina/spongecake-ms --layers 1 2 --minutes 15 --out addon/bake/weights
+    python -m training.train --data /tmp/quick --quick --out /tmp/weights             # seconds, for tests
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from addon.bake import layer_rows, mlp
+from addon.bake import spongecake as ms
+from training import dataset
+from training.spongecake_torch import LayerBatch, eval_stack
+
+HIDDEN = (128, 128, 128)
+VALIDATION_SET = Path(__file__).resolve().parents[1] / "tests" / "data" / "spongecake_ms_validation"
+
+
+class TorchOps:
+    exp, tanh, sqrt, log, sigmoid = torch.exp, torch.tanh, torch.sqrt, torch.log, torch.sigmoid
+    softplus = staticmethod(torch.nn.functional.softplus)
+
+    @staticmethod
+    def where(c, a, b):
+        return torch.where(c, a, b)
+
+    @staticmethod
+    def any_last(x):
+        return x.any(-1, keepdim=True)
+
+    @staticmethod
+    def sum_last(x):
+        return x.sum(-1, keepdim=True)
+
+    @staticmethod
+    def stack(parts, axis):
+        return torch.stack(parts, dim=axis)
+
+    @staticmethod
+    def concat(parts, axis):
+        return torch.cat(parts, dim=axis)
+
+
+def make_network(n_layers: int) -> torch.nn.Sequential:
+    sizes = (n_layers * ms.FEATURES, *HIDDEN, n_layers * ms.OUTPUTS + ms.WEIGHT_OUTPUTS)
+    modules = []
+    for i in range(len(sizes) - 1):
+        modules.append(torch.nn.Linear(sizes[i], sizes[i + 1]))
+        if i + 2 < len(sizes):
+            modules.append(torch.nn.SiLU())
+    last = modules[-1]
+    with torch.no_grad():
+        last.weight.mul_(0.1)
+        last.bias.zero_()
+        last.bias[-ms.WEIGHT_OUTPUTS:] = -3.0  # start with small lobes
+    return torch.nn.Sequential(*modules).double()
+
+
+def to_mlp(net: torch.nn.Sequential, manifest: dict) -> mlp.MLP:
+    linears = [m for m in net if isinstance(m, torch.nn.Linear)]
+    return mlp.MLP(tuple(m.weight.detach().numpy().T.copy() for m in linears),
+                   tuple(m.bias.detach().numpy().copy() for m in linears), manifest)
+
+
+# ------------------------------------------------------------------------------------------------ loss
+
+def predicted_lobe(net, rows: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
+    """W1 f_ss(params') + W2 / pi for B configurations at their (n_wi x n_wo) pairs, times |cos wo|: (B, n_wi, n_wo, 3)."""
+    x = torch.as_tensor(ms.features(rows.numpy()))
+    lobe, weights = ms.decode(net(x), rows, TorchOps)
+    layers = [LayerBatch(kind=lobe[:, k, layer_rows.TYPE].round().long(), roughness=lobe[:, k, layer_rows.ROUGHNESS],
+                         albedo=lobe[:, k, layer_rows.ALBEDO], thickness=lobe[:, k, layer_rows.THICKNESS],
+                         f0=lobe[:, k, layer_rows.F0], orientation=lobe[:, k, layer_rows.ORIENTATION])
+              for k in range(rows.shape[1])]
+    b, n_wi, n_wo = wi.shape[0], wi.shape[1], wo.shape[1]
+    big_wi = wi[:, :, None, :].expand(b, n_wi, n_wo, 3).reshape(b, -1, 3)
+    big_wo = wo[:, None, :, :].expand(b, n_wi, n_wo, 3).reshape(b, -1, 3)
+    f = eval_stack(layers, big_wi, big_wo)
+    same = ((big_wi[..., 2] > 0) == (big_wo[..., 2] > 0)).unsqueeze(-1)
+    lambert = torch.where(same, weights[:, None, 0:1], weights[:, None, 1:2]) / math.pi
+    return ((f + lambert) * big_wo[..., 2:].abs()).reshape(b, n_wi, n_wo, 3)
+
+
+def target(data: dict, index) -> torch.Tensor:
+    return torch.as_tensor(data["ms"][index] * np.abs(data["wo"][index][:, None, :, 2:]), dtype=torch.float64)
+
+
+def tensors(data: dict, index):
+    return (torch.as_tensor(data["rows"][index]), torch.as_tensor(data["wi"][index], dtype=torch.float64),
+            torch.as_tensor(data["wo"][index], dtype=torch.float64))
+
+
+# ------------------------------------------------------------------------------------------ evaluation
+
+def lobe_errors(predict, data: dict) -> dict:
+    """Per-configuration relative L1 error of the predicted MS lobe (f |cos wo|) against Monte Carlo, with the
+    Monte Carlo noise's own contribution for scale; ``predict(rows, wi, wo)`` returns (B, n_wi, n_wo, 3)."""
+    index = np.arange(len(data["rows"]))
+    with torch.no_grad():
+        pred = predict(*tensors(data, index)).numpy()
+    cos_o = np.abs(data["wo"][:, None, :, 2:])
+    truth = data["ms"] * cos_o
+    total = truth.sum(axis=(1, 2, 3))
+    rel = np.abs(pred - truth).sum(axis=(1, 2, 3)) / np.maximum(total, 1e-12)
+    energy = (pred.sum(axis=(1, 2, 3)) - total) / np.maximum(total, 1e-12)
+    noise = (np.abs(data["ms_half_diff"]) * cos_o).sum(axis=(1, 2, 3)) / np.maximum(total, 1e-12)
+    significant = total > 1e-3 * total.max()
+    return {"configs": int(len(rel)), "mean_relative_lobe_error": float(rel[significant].mean()),
+            "median_relative_lobe_error": float(np.median(rel[significant])),
+            "worst_relative_lobe_error": float(rel[significant].max()),
+            "mean_relative_energy_error": float(np.abs(energy[significant]).mean()),
+            "mean_monte_carlo_noise": float(noise[significant].mean()),
+            "per_config": rel.tolist()}
+
+
+# ------------------------------------------------------------------------------------------- training
+
+def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int = 32, log=print):
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(len(data["rows"]))
+    n_val = max(1, len(order) // 10)
+    val, train_idx = order[:n_val], order[n_val:]
+    net = make_network(n_layers)
+    opt = torch.optim.Adam(net.parameters(), lr=1e-3)
+    start, step, epoch, last_log = time.time(), 0, 0, -math.inf
+    budget = minutes * 60.0
+    while time.time() - start < budget:
+        epoch += 1
+        shuffled = rng.permutation(train_idx)
+        for i in range(0, len(shuffled), batch):
+            idx = shuffled[i:i + batch]
+            frac = min(1.0, (time.time() - start) / budget)
+            for group in opt.param_groups:
+                group["lr"] = 1e-3 * 0.5 * (1.0 + math.cos(math.pi * frac)) + 1e-5
+            loss = (predicted_lobe(net, *tensors(data, idx)) - target(data, idx)).abs().mean()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            step += 1
+            if time.time() - start > budget:
+                break
+        if time.time() - last_log > 30.0:
+            last_log = time.time()
+            with torch.no_grad():
+                val_loss = (predicted_lobe(net, *tensors(data, val)) - target(data, val)).abs().mean()
+            log(f"  {n_layers} layer(s) epoch {epoch} step {step}: train MAE {loss.item():.3e}, "
+                f"validation MAE {val_loss.item():.3e}  ({time.time() - start:.0f} s)")
+    return net, {"epochs": epoch, "steps": step, "seconds": round(time.time() - start, 1),
+                 "train_configs": int(len(train_idx)), "split_validation_configs": int(n_val), "val_index": val}
+
+
+def code_version() -> str:
+    root = Path(__file__).resolve().parents[1]
+    try:
+        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
+                             check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "training", "addon/bake"], cwd=root,
+                               capture_output=True, text=True, check=True).stdout.strip()
+        return rev + ("+local changes" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def export(net, info: dict, data: dict, n_layers: int, out: Path, validation: Path | None, log=print) -> dict:
+    net.eval()
+    metas = data["meta"]
+    split = {k: v for k, v in lobe_errors(lambda *t: predicted_lobe(net, *t),
+                                          {k: data[k][info["val_index"]] for k in dataset.ARRAYS}).items()
+             if k != "per_config"}
+    manifest = {
+        "model": "spongecake multiple scattering", "layers": n_layers, "inputs": n_layers * ms.FEATURES,
+        "hidden": list(HIDDEN), "activation": "silu", "outputs": n_layers * ms.OUTPUTS + ms.WEIGHT_OUTPUTS,
+        "training_configs": info["train_configs"], "pairs_per_config": int(data["ms"].shape[1] * data["ms"].shape[2]),
+        "paths_per_wi": metas[0]["paths"], "max_depth": metas[0]["max_depth"], "dataset_seed": metas[0]["seed"],
+        "dataset_version": metas[0]["version"], "epochs": info["epochs"], "steps": info["steps"],
+        "training_seconds": info["seconds"], "split_validation": split,
+        "date": datetime.date.today().isoformat(), "code_version": code_version(),
+    }
+    if validation is not None and (validation / f"layers{n_layers}").exists():
+        held_out = lobe_errors(lambda *t: predicted_lobe(net, *t), dataset.load(validation, n_layers))
+        manifest["held_out_validation"] = {k: v for k, v in held_out.items() if k != "per_config"}
+        manifest["held_out_per_config"] = held_out["per_config"]
+    path = Path(out) / ms.weights_path(n_layers).name
+    exported = to_mlp(net, manifest)
+    mlp.save(path, exported.weights, exported.biases, manifest)
+    log(f"wrote {path}: " + json.dumps({k: manifest[k] for k in ("training_configs", "epochs", "split_validation")}))
+    return manifest
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m training.train", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", type=Path, default=dataset.DEFAULT_CACHE)
+    ap.add_argument("--layers", type=int, nargs="+", default=[1, 2], choices=[1, 2])
+    ap.add_argument("--minutes", type=float, default=20.0, help="training time per network")
+    ap.add_argument("--out", type=Path, required=True, help="folder for the .npz weights (addon/bake/weights ships)")
+    ap.add_argument("--validation", type=Path, default=VALIDATION_SET)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--quick", action="store_true", help="a few seconds of training (tests)")
+    a = ap.parse_args(argv)
+    torch.set_num_threads(a.threads)
+    for n_layers in a.layers:
+        data = dataset.load(a.data, n_layers)
+        minutes = 0.05 if a.quick else a.minutes
+        print(f"training the {n_layers}-layer network on {len(data['rows'])} configurations for {minutes} min",
+              flush=True)
+        net, info = train(data, n_layers, minutes, seed=a.seed, batch=4 if a.quick else 32)
+        export(net, info, data, n_layers, a.out, a.validation)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
