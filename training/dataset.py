@@ -32,6 +32,7 @@ import numpy as np
 
 from addon.bake import layer_rows
 from addon.bake.exr import atomic_path
+from addon.bake.validation import ARRAYS, load_shards
 from addon.reference import spongecake as reference
 from addon.reference.frames import spherical
 
@@ -159,18 +160,9 @@ def make_shard(job) -> str:
     return path.name
 
 
-ARRAYS = ("rows", "wi", "wo", "ms", "ms_half_diff", "ss")
-
-
 def load(out: Path, n_layers: int) -> dict:
     """All shards of one layer count concatenated (arrays as in the module docstring, plus ``meta``)."""
-    files = sorted((Path(out) / f"layers{n_layers}").glob("shard*.npz"))
-    if not files:
-        raise FileNotFoundError(f"no {n_layers}-layer shards in {out}: run python -m training.dataset first")
-    parts = [dict(np.load(f)) for f in files]
-    data = {k: np.concatenate([p[k] for p in parts]) for k in ARRAYS}
-    data["meta"] = [json.loads(str(p["meta"])) for p in parts]
-    return data
+    return load_shards(out, n_layers)
 
 
 def noise(data: dict) -> dict:

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from addon.bake import layer_rows, mlp
+from addon.bake import layer_rows, mlp, validation
 from addon.bake import spongecake as ms
 from training import dataset
 from training.spongecake_torch import LayerBatch, eval_stack
@@ -111,25 +111,12 @@ def tensors(data: dict, index):
 
 # ------------------------------------------------------------------------------------------ evaluation
 
-def lobe_errors(predict, data: dict) -> dict:
-    """Per-configuration relative L1 error of the predicted MS lobe (f |cos wo|) against Monte Carlo, with the
-    Monte Carlo noise's own contribution for scale; ``predict(rows, wi, wo)`` returns (B, n_wi, n_wo, 3)."""
+def lobe_errors(net, data: dict) -> dict:
+    """``addon.bake.validation.lobe_errors`` for the network being trained (torch forward pass)."""
     index = np.arange(len(data["rows"]))
     with torch.no_grad():
-        pred = predict(*tensors(data, index)).numpy()
-    cos_o = np.abs(data["wo"][:, None, :, 2:])
-    truth = data["ms"] * cos_o
-    total = truth.sum(axis=(1, 2, 3))
-    rel = np.abs(pred - truth).sum(axis=(1, 2, 3)) / np.maximum(total, 1e-12)
-    energy = (pred.sum(axis=(1, 2, 3)) - total) / np.maximum(total, 1e-12)
-    noise = (np.abs(data["ms_half_diff"]) * cos_o).sum(axis=(1, 2, 3)) / np.maximum(total, 1e-12)
-    significant = total > 1e-3 * total.max()
-    return {"configs": int(len(rel)), "mean_relative_lobe_error": float(rel[significant].mean()),
-            "median_relative_lobe_error": float(np.median(rel[significant])),
-            "worst_relative_lobe_error": float(rel[significant].max()),
-            "mean_relative_energy_error": float(np.abs(energy[significant]).mean()),
-            "mean_monte_carlo_noise": float(noise[significant].mean()),
-            "per_config": rel.tolist()}
+        predicted = predicted_lobe(net, *tensors(data, index)).numpy()
+    return validation.lobe_errors(data, predicted)
 
 
 # ------------------------------------------------------------------------------------------- training
@@ -181,11 +168,10 @@ def code_version() -> str:
         return "unknown"
 
 
-def export(net, info: dict, data: dict, n_layers: int, out: Path, validation: Path | None, log=print) -> dict:
+def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path | None, log=print) -> dict:
     net.eval()
     metas = data["meta"]
-    split = {k: v for k, v in lobe_errors(lambda *t: predicted_lobe(net, *t),
-                                          {k: data[k][info["val_index"]] for k in dataset.ARRAYS}).items()
+    split = {k: v for k, v in lobe_errors(net, {k: data[k][info["val_index"]] for k in validation.ARRAYS}).items()
              if k != "per_config"}
     manifest = {
         "model": "spongecake multiple scattering", "layers": n_layers, "inputs": n_layers * ms.FEATURES,
@@ -196,10 +182,10 @@ def export(net, info: dict, data: dict, n_layers: int, out: Path, validation: Pa
         "training_seconds": info["seconds"], "split_validation": split,
         "date": datetime.date.today().isoformat(), "code_version": code_version(),
     }
-    if validation is not None and (validation / f"layers{n_layers}").exists():
-        held_out = lobe_errors(lambda *t: predicted_lobe(net, *t), dataset.load(validation, n_layers))
-        manifest["held_out_validation"] = {k: v for k, v in held_out.items() if k != "per_config"}
-        manifest["held_out_per_config"] = held_out["per_config"]
+    if held_out is not None and (held_out / f"layers{n_layers}").exists():
+        scores = lobe_errors(net, dataset.load(held_out, n_layers))
+        manifest["held_out_validation"] = {k: v for k, v in scores.items() if k != "per_config"}
+        manifest["held_out_per_config"] = scores["per_config"]
     path = Path(out) / ms.weights_path(n_layers).name
     exported = to_mlp(net, manifest)
     mlp.save(path, exported.weights, exported.biases, manifest)

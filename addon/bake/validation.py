@@ -1,0 +1,63 @@
+"""Score the shipped multiple-scattering networks against Monte Carlo data (numpy only; no torch).
+
+Data come in the dataset's shard format (``training/dataset.py``): folders ``layers1/``, ``layers2/`` of
+``shard*.npz`` with ``rows``, ``wi``, ``wo``, ``ms`` (order >= 2 of f, no cosine) and ``ms_half_diff``.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from . import layer_rows
+from .spongecake import eval_multiple
+
+ARRAYS = ("rows", "wi", "wo", "ms", "ms_half_diff", "ss")
+
+
+def load_shards(folder, n_layers: int) -> dict:
+    """All shards of one layer count concatenated (the arrays above, plus ``meta``: one dict per shard)."""
+    files = sorted((Path(folder) / f"layers{n_layers}").glob("shard*.npz"))
+    if not files:
+        raise FileNotFoundError(f"no {n_layers}-layer shards in {folder}: run python -m training.dataset first")
+    parts = []
+    for f in files:
+        with np.load(f) as data:
+            parts.append({k: data[k] for k in (*ARRAYS, "meta")})
+    out = {k: np.concatenate([p[k] for p in parts]) for k in ARRAYS}
+    out["meta"] = [json.loads(str(p["meta"])) for p in parts]
+    return out
+
+
+def predicted_lobes(data: dict) -> np.ndarray:
+    """The network's multiple-scattering lobe f_ms |cos wo| at every stored pair, (C, n_wi, n_wo, 3)."""
+    out = np.zeros(data["ms"].shape)
+    for c, rows in enumerate(data["rows"]):
+        params = layer_rows.params_from_rows(rows)
+        wi, wo = data["wi"][c].astype(float), data["wo"][c].astype(float)
+        big_wi, big_wo = np.repeat(wi, len(wo), axis=0), np.tile(wo, (len(wi), 1))
+        f = eval_multiple(params, big_wi, big_wo) * np.abs(big_wo[:, 2:])
+        out[c] = f.reshape(out[c].shape)
+    return out
+
+
+def lobe_errors(data: dict, predicted: np.ndarray | None = None) -> dict:
+    """Per configuration, the relative L1 error of the predicted lobe (f |cos wo| summed over the stored pairs)
+    against Monte Carlo, its relative energy error, and the Monte Carlo noise's own relative L1 for scale.
+    Configurations with less than 1e-3 of the largest multiple-scattering energy are left out of the means."""
+    pred = predicted_lobes(data) if predicted is None else predicted
+    cos_o = np.abs(data["wo"][:, None, :, 2:])
+    truth = data["ms"] * cos_o
+    total = truth.sum(axis=(1, 2, 3))
+    safe = np.maximum(total, 1e-12)
+    rel = np.abs(pred - truth).sum(axis=(1, 2, 3)) / safe
+    energy = (pred.sum(axis=(1, 2, 3)) - total) / safe
+    noise = (np.abs(data["ms_half_diff"]) * cos_o).sum(axis=(1, 2, 3)) / safe
+    keep = total > 1e-3 * total.max()
+    return {"configs": int(keep.sum()), "mean_relative_lobe_error": float(rel[keep].mean()),
+            "median_relative_lobe_error": float(np.median(rel[keep])),
+            "worst_relative_lobe_error": float(rel[keep].max()),
+            "mean_relative_energy_error": float(np.abs(energy[keep]).mean()),
+            "mean_monte_carlo_noise": float(noise[keep].mean()),
+            "per_config": np.where(keep, rel, np.nan).tolist()}
