@@ -107,6 +107,8 @@ def _sample_orientation(rng, kind) -> np.ndarray:
 def stratified_hemisphere(rng, n: int) -> np.ndarray:
     """n (a square) jittered directions uniform in solid angle over the upper hemisphere."""
     side = int(round(np.sqrt(n)))
+    if side * side != n:
+        raise ValueError(f"direction counts must be square numbers per hemisphere, got {n}")
     i, j = np.divmod(np.arange(side * side), side)
     cos_theta = 1.0 - (i + rng.random(side * side)) / side
     phi = 2.0 * np.pi * (j + rng.random(side * side)) / side

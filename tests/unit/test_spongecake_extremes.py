@@ -50,6 +50,17 @@ def test_every_output_is_finite_and_non_negative(layer, thickness):
             _check(*spongecake.ground_truth(p, wi, wo, n_paths=8, seed=0, max_depth=4))
 
 
+@pytest.mark.parametrize("thickness", [1e-6, 1e4])
+@pytest.mark.parametrize("layer", LAYERS, ids=lambda d: "-".join(str(v) for v in d.values()))
+def test_multiple_scattering_lobes_are_finite_and_non_negative(layer, thickness):
+    wi = np.repeat(DIRECTIONS, len(DIRECTIONS), 0)
+    wo = np.tile(DIRECTIONS, (len(DIRECTIONS), 1))
+    for stack in STACKS.values():
+        p = spongecake.params_from_dict(dict(_params(layer, thickness, stack).to_dict(), multiple_scattering=True))
+        with np.errstate(divide="raise", over="raise", invalid="raise"):
+            _check(spongecake.eval(p, wi, wo))
+
+
 @pytest.mark.parametrize("layer", [LAYERS[0], LAYERS[7], LAYERS[-1]], ids=["surface", "fiber", "hg"])
 def test_directional_albedo_at_extremes(layer):
     for thickness, stack in itertools.product((1e-6, 1e4), STACKS.values()):

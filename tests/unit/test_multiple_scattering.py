@@ -1,0 +1,141 @@
+"""SpongeCake multiple scattering: numpy inference against the torch training code, the quick train → export →
+load pipeline, the shipped weights against their recorded validation errors, and the prediction's symmetries."""
+import json
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from addon.bake import layer_rows, mlp, validation  # noqa: E402
+from addon.bake import spongecake as ms  # noqa: E402
+from addon.models.params import ParamError  # noqa: E402
+from addon.reference import spongecake as ref  # noqa: E402
+from training import dataset, train  # noqa: E402
+
+VALIDATION = train.VALIDATION_SET
+
+
+def _rows(n_layers, n=64, seed=3):
+    return dataset.sample_layers(np.random.default_rng(seed), n, n_layers)
+
+
+def _random_network(n_layers, seed=0):
+    torch.manual_seed(seed)
+    net = train.make_network(n_layers)
+    with torch.no_grad():
+        net[-1].weight.mul_(20.0)  # far from the near-constant initial output, so the test can fail
+    return net
+
+
+@pytest.mark.parametrize("n_layers", [1, 2])
+def test_numpy_inference_matches_torch_through_the_shipped_float32_format(n_layers, tmp_path):
+    net = _random_network(n_layers)
+    rows = _rows(n_layers)
+    exported = train.to_mlp(net, {})
+    mlp.save(tmp_path / "w.npz", exported.weights, exported.biases, {"layers": n_layers})
+    loaded = mlp.load(tmp_path / "w.npz")
+    net32 = train.make_network(n_layers)
+    net32.load_state_dict({k: v.float().double() for k, v in net.state_dict().items()})  # the float32 weights
+    with torch.no_grad():
+        lobe_t, w_t = ms.decode(net32(torch.as_tensor(ms.features(rows))), torch.as_tensor(rows), train.TorchOps)
+    lobe_n, w_n = ms.decode(loaded(ms.features(rows)), rows)
+    np.testing.assert_allclose(lobe_n, lobe_t.numpy(), rtol=1e-5, atol=1e-12)
+    np.testing.assert_allclose(w_n, w_t.numpy(), rtol=1e-5, atol=1e-12)
+    assert np.ptp(lobe_n[:, :, layer_rows.ROUGHNESS]) > 0.1  # the outputs really vary
+
+
+@pytest.mark.parametrize("n_layers", [1, 2])
+def test_numpy_lobe_matches_the_differentiable_training_lobe(n_layers, monkeypatch, tmp_path):
+    """The loss's W1 f_ss(params') + W2 / pi (torch) and the add-on's eval_multiple (numpy) are one function."""
+    net = _random_network(n_layers, seed=1)
+    exported = train.to_mlp(net, {})
+    mlp.save(tmp_path / ms.weights_path(n_layers).name, exported.weights, exported.biases, {})
+    monkeypatch.setattr(ms, "WEIGHTS", tmp_path)
+    mlp.load.cache_clear()
+    ms.predict.cache_clear()
+    rng = np.random.default_rng(5)
+    data = {"rows": _rows(n_layers, 6), "wi": np.stack([dataset.stratified_hemisphere(rng, 9) for _ in range(6)]),
+            "wo": np.stack([dataset.stratified_sphere(rng, 32) for _ in range(6)])}
+    net32 = train.make_network(n_layers)
+    net32.load_state_dict({k: v.float().double() for k, v in net.state_dict().items()})
+    with torch.no_grad():
+        torch_lobe = train.predicted_lobe(net32, *train.tensors(data, np.arange(6))).numpy()
+    data["ms"] = np.zeros(torch_lobe.shape)
+    np.testing.assert_allclose(validation.predicted_lobes(data), torch_lobe, rtol=1e-5, atol=1e-12)
+    mlp.load.cache_clear()
+    ms.predict.cache_clear()
+
+
+def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
+    data_dir, weights = tmp_path / "data", tmp_path / "weights"
+    assert dataset.main(["--quick", "--out", str(data_dir), "--workers", "1"]) == 0
+    shards = sorted(data_dir.rglob("*.npz"))
+    assert dataset.main(["--quick", "--out", str(data_dir), "--workers", "1"]) == 0  # resumes: nothing redone
+    assert [s.stat().st_mtime_ns for s in shards] == [s.stat().st_mtime_ns for s in sorted(data_dir.rglob("*.npz"))]
+    assert train.main(["--quick", "--data", str(data_dir), "--out", str(weights), "--validation", str(data_dir),
+                       "--threads", "1"]) == 0
+    monkeypatch.setattr(ms, "WEIGHTS", weights)
+    mlp.load.cache_clear()
+    ms.predict.cache_clear()
+    for n_layers in (1, 2):
+        manifest = ms.network(n_layers).manifest
+        assert manifest["layers"] == n_layers and manifest["training_configs"] > 0
+        assert "held_out_validation" in manifest and manifest["code_version"]
+        p = ref.params_from_dict({"layers": [{"albedo": [0.9, 0.9, 0.9]}] * n_layers, "multiple_scattering": True})
+        wi, wo = dataset.stratified_sphere(np.random.default_rng(0), 32), dataset.stratified_sphere(
+            np.random.default_rng(1), 32)
+        f = ref.eval(p, wi, wo) - ref.eval(ref.params_from_dict({"layers": [{"albedo": [0.9] * 3}] * n_layers}), wi, wo)
+        assert np.all(np.isfinite(f)) and np.all(f >= 0) and f.max() > 0
+    mlp.load.cache_clear()
+    ms.predict.cache_clear()
+
+
+@pytest.mark.parametrize("n_layers", [1, 2])
+def test_shipped_weights_meet_their_recorded_validation_error(n_layers):
+    net = ms.network(n_layers)
+    recorded = net.manifest["held_out_validation"]
+    scores = validation.lobe_errors(validation.load_shards(VALIDATION, n_layers))
+    assert scores["configs"] == recorded["configs"]
+    for key in ("mean_relative_lobe_error", "worst_relative_lobe_error", "mean_relative_energy_error"):
+        assert scores[key] == pytest.approx(recorded[key], rel=1e-3), key
+    assert net.n_inputs == n_layers * ms.FEATURES
+
+
+def test_shipped_manifests_say_how_the_networks_were_made():
+    for n_layers in (1, 2):
+        m = ms.network(n_layers).manifest
+        for key in ("training_configs", "pairs_per_config", "paths_per_wi", "dataset_seed", "date", "code_version",
+                    "activation", "hidden", "split_validation", "held_out_validation"):
+            assert key in m, key
+        assert ms.weights_path(n_layers).stat().st_size < 400_000
+        json.dumps(m)
+
+
+def test_light_from_below_is_the_flipped_stack():
+    p = ref.params_from_dict({"layers": [
+        {"type": "fiber", "roughness": 0.3, "thickness": 0.7, "albedo": [0.9, 0.8, 0.7], "orientation": [0.6, 0, 0.8]},
+        {"type": "surface", "roughness": 0.5, "thickness": 2.0, "albedo": [0.95, 0.95, 0.95]}],
+        "multiple_scattering": True})
+    flipped = layer_rows.params_from_rows(layer_rows.flipped(layer_rows.stack_rows(p)))
+    rng = np.random.default_rng(2)
+    wi = dataset.stratified_hemisphere(rng, 16) * [1, 1, -1]
+    wo = dataset.stratified_hemisphere(rng, 16) * rng.choice([-1.0, 1.0], (16, 1))
+    mirror = np.array([1.0, 1.0, -1.0])
+    np.testing.assert_allclose(ms.eval_multiple(p, wi, wo), ms.eval_multiple(flipped, wi * mirror, wo * mirror),
+                               rtol=1e-12, atol=1e-15)
+
+
+def test_a_substrate_closes_the_multiple_scattering_lobes():
+    p = ref.params_from_dict({"layers": [{"albedo": [0.9, 0.9, 0.9]}], "substrate": {"type": "diffuse"},
+                              "multiple_scattering": True})
+    wi = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    wo = np.array([[0.6, 0.0, 0.8], [0.6, 0.0, -0.8], [0.6, 0.0, 0.8]])
+    f = ms.eval_multiple(p, wi, wo)
+    assert f[0].min() > 0 and np.all(f[1:] == 0)
+
+
+def test_multiple_scattering_is_refused_beyond_two_layers():
+    with pytest.raises(ParamError, match="1 or 2 layers"):
+        ref.params_from_dict({"layers": [{}, {}, {}], "multiple_scattering": True})
+    assert not ref.params_from_dict({"layers": [{}, {}, {}]}).multiple_scattering
