@@ -6,8 +6,10 @@ VENV42 := .venv-blender-4.2
 PY42 := $(VENV42)/bin/python
 EXT_TOOL = $(wildcard $(VENV)/lib/python3.11/site-packages/bpy/*/scripts/addons_core/bl_pkg/cli/blender_ext.py)
 OUT ?= out
+# Multiple-scattering training data: a cache outside the repository (resumable; see docs/training.md).
+DATA ?= $(HOME)/.cache/lamina/spongecake-ms
 
-.PHONY: venv test test-4.2 test-all demo bench extension clean
+.PHONY: venv test test-4.2 test-all demo bench extension dataset train validation-set clean
 
 venv: $(VENV)/.stamp
 
@@ -37,6 +39,18 @@ demo: venv
 
 bench: venv
 	$(PY) -m addon.cli bench --out docs --resolution 48 --samples 32
+
+# The documented default dataset (hours on 2 cores), then the shipped networks (addon/bake/weights).
+dataset: venv
+	$(PY) -m training.dataset --out $(DATA)
+
+train: venv
+	$(PY) -m training.train --data $(DATA) --out addon/bake/weights
+
+# The held-out validation set shipped in tests/data (independent seed, 4x the paths).
+validation-set: venv
+	$(PY) -m training.dataset --out tests/data/spongecake_ms_validation --seed 1001 --configs 16 16 --shard 16 \
+		--paths 16000 --n-wi 9 --n-wo 72
 
 extension: venv
 	mkdir -p dist

@@ -32,6 +32,7 @@ from training import dataset
 from training.spongecake_torch import LayerBatch, eval_stack
 
 HIDDEN = (128, 128, 128)
+ENERGY_FLOOR = 1e-3  # about the median configuration's mean f |cos wo| of multiple scattering in the dataset
 VALIDATION_SET = Path(__file__).resolve().parents[1] / "tests" / "data" / "spongecake_ms_validation"
 
 
@@ -71,7 +72,7 @@ def make_network(n_layers: int) -> torch.nn.Sequential:
     with torch.no_grad():
         last.weight.mul_(0.1)
         last.bias.zero_()
-        last.bias[-ms.WEIGHT_OUTPUTS:] = -3.0  # start with small lobes
+        last.bias[-ms.WEIGHT_OUTPUTS:] = -5.0  # start with small lobes
     return torch.nn.Sequential(*modules).double()
 
 
@@ -96,8 +97,17 @@ def predicted_lobe(net, rows: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor) 
     big_wo = wo[:, None, :, :].expand(b, n_wi, n_wo, 3).reshape(b, -1, 3)
     f = eval_stack(layers, big_wi, big_wo)
     same = ((big_wi[..., 2] > 0) == (big_wo[..., 2] > 0)).unsqueeze(-1)
-    lambert = torch.where(same, weights[:, None, 0:1], weights[:, None, 1:2]) / math.pi
+    lambert = torch.where(same, weights[:, None, 0:3], weights[:, None, 3:6]) / math.pi
     return ((f + lambert) * big_wo[..., 2:].abs()).reshape(b, n_wi, n_wo, 3)
+
+
+def lobe_loss(net, data: dict, index) -> torch.Tensor:
+    """MAE of f |cos wo| per configuration, relative to that configuration's mean multiple scattering plus
+    ENERGY_FLOOR: the error that matters is relative to each lobe, and the floor keeps configurations whose
+    multiple scattering is negligible (and mostly Monte Carlo noise) from dominating."""
+    truth = target(data, index)
+    error = (predicted_lobe(net, *tensors(data, index)) - truth).abs().mean(dim=(1, 2, 3))
+    return (error / (truth.mean(dim=(1, 2, 3)) + ENERGY_FLOOR)).mean()
 
 
 def target(data: dict, index) -> torch.Tensor:
@@ -139,7 +149,7 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
             frac = min(1.0, (time.time() - start) / budget)
             for group in opt.param_groups:
                 group["lr"] = 1e-3 * 0.5 * (1.0 + math.cos(math.pi * frac)) + 1e-5
-            loss = (predicted_lobe(net, *tensors(data, idx)) - target(data, idx)).abs().mean()
+            loss = lobe_loss(net, data, idx)
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -149,7 +159,7 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
         if time.time() - last_log > 30.0:
             last_log = time.time()
             with torch.no_grad():
-                val_loss = (predicted_lobe(net, *tensors(data, val)) - target(data, val)).abs().mean()
+                val_loss = lobe_loss(net, data, val)
             log(f"  {n_layers} layer(s) epoch {epoch} step {step}: train MAE {loss.item():.3e}, "
                 f"validation MAE {val_loss.item():.3e}  ({time.time() - start:.0f} s)")
     return net, {"epochs": epoch, "steps": step, "seconds": round(time.time() - start, 1),

@@ -135,10 +135,10 @@ def _label(layer: model.Layer, prm: Param) -> str:
 MS_PREFIX = "MS "
 MS_PANEL = "Multiple Scattering"
 MS_WEIGHTS = (
-    Param("reflection", "Reflection", "float", 0.0, 0.0, None, texturable=True,
-          description="Baked weight W2r of the Lambertian multiple-scattering lobe on the light's side"),
-    Param("transmission", "Transmission", "float", 0.0, 0.0, None, texturable=True,
-          description="Baked weight W2t of the Lambertian multiple-scattering lobe on the far side"),
+    Param("reflection", "Reflection", "color", (0.0, 0.0, 0.0), 0.0, None, texturable=True,
+          description="Baked weight W2r (RGB) of the Lambertian multiple-scattering lobe on the light's side"),
+    Param("transmission", "Transmission", "color", (0.0, 0.0, 0.0), 0.0, None, texturable=True,
+          description="Baked weight W2t (RGB) of the Lambertian multiple-scattering lobe on the far side"),
 )
 
 
@@ -225,9 +225,9 @@ def _multiple_scattering(b, p: model.Params, mu) -> None:
     """Sec. 5: the network's extra single-scattering lobe (its parameters baked into the ``MS`` inputs, W1 in
     the albedo), mapped like the layers themselves, plus the Lambert lobes W2r / π and W2t / π (exact)."""
     _layers(b, p, mu, MS_PREFIX)
-    b.diffuse(b.scale((1.0, 1.0, 1.0), b.input(MS_PREFIX + "Reflection", "float")))
+    b.diffuse(b.input(MS_PREFIX + "Reflection", "color"))
     if p.substrate is None:
-        b.translucent(b.scale((1.0, 1.0, 1.0), b.input(MS_PREFIX + "Transmission", "float")))
+        b.translucent(b.input(MS_PREFIX + "Transmission", "color"))
 
 
 def _slab_transmission(b, t):
