@@ -7,8 +7,7 @@ The multiple-scattering part of f for a stack of 1 or 2 layers (no substrate, li
 where params' has the same layer types, count and Fresnel structure as params. The paper's single
 Lambertian weight W2 is split into reflection and transmission weights, because a thick layer sends far more
 multiply scattered light back than through, and each is RGB, because multiple scattering is more saturated
-than single scattering (γ^n): per-configuration fits to the Monte Carlo lobes drop from 22–28% to 13–16%
-relative L1 error for coloured media with RGB weights (measured while designing this; docs/training.md). Light from below is the prediction for the flipped stack.
+than single scattering (γ^n) and grey Lambert weights cannot follow it (docs/training.md). Light from below is the prediction for the flipped stack.
 W1 is folded into the lobe's albedo (f_ss is linear in it), so a prediction is a lobe ``Params`` plus W2r and W2t.
 
 Encoding (per layer, ``FEATURES`` = 14 inputs): type one-hot (3); roughness as log alpha mapped from
