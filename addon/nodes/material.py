@@ -3,11 +3,16 @@
 Node groups and OSL texts are named with a ``Lamina`` prefix and reused per content hash, so re-running an
 operator never duplicates them. Parameter values live on the group or script node's inputs; the model dict
 is kept in the material's ``lamina`` property so the other form can be generated from the current values.
+With multiple scattering, the network's prediction is baked into the node's ``MS`` inputs and the material's
+``lamina_ms_key`` property records which parameters (and networks) it was baked for.
 """
 from __future__ import annotations
 
 import hashlib
+import importlib
 import json
+import math
+from dataclasses import replace
 
 import bpy
 
@@ -118,8 +123,7 @@ def new_material(model_id: str, p, form: str = "nodes", name: str | None = None)
     if form not in FORMS:
         raise ValueError(f"unknown form {form!r}; expected one of {', '.join(FORMS)}")
     mat, _, _ = empty_material(name or MODELS[model_id].LABEL)
-    mat["lamina"] = json.dumps({"model": model_id, "params": p.to_dict()})
-    _build_tree(mat, model_id, p, form)
+    _rebuild(mat, model_id, p, form)
     return mat
 
 
@@ -151,8 +155,77 @@ def form_of(mat) -> str:
 def set_form(mat, form: str) -> None:
     """Rebuild the material's Lamina node in ``form``, keeping the current parameter values."""
     model_id, p = current_params(mat)
-    mat["lamina"] = json.dumps({"model": model_id, "params": p.to_dict()})
+    _rebuild(mat, model_id, p, form)
+
+
+def set_multiple_scattering(mat, on: bool) -> None:
+    """Rebuild the material's Lamina node with multiple scattering on or off, keeping the current parameter
+    values and the form. Raises ParamError (material untouched) for stacks no network covers (3-4 layers)."""
+    model_id, p = current_params(mat)
+    p = MODELS[model_id].validate({**p.to_dict(), "multiple_scattering": on}).params
+    _rebuild(mat, model_id, p, form_of(mat))
+
+
+def _rebuild(mat, model_id: str, p, form: str) -> None:
+    """Build the tree first (nothing is touched if that fails), then record the parameters and the bake."""
     _build_tree(mat, model_id, p, form)
+    mat["lamina"] = json.dumps({"model": model_id, "params": p.to_dict()})
+    bake_constants(mat)  # records the bake key of the values as the sockets hold them (float32)
+
+
+# --------------------------------------------------------------------------------- multiple scattering
+
+MS_KEY = "lamina_ms_key"
+_ms_shares: dict[str, float] = {}
+
+
+def ms_key(model_id: str, p) -> str:
+    """Identifies a multiple-scattering bake: the parameters and the manifest of the network that predicts them."""
+    network = importlib.import_module(f"..bake.{model_id}", __package__).network(len(p.layers))
+    text = json.dumps([p.to_dict(), network.manifest], sort_keys=True)
+    return hashlib.md5(text.encode()).hexdigest()
+
+
+def bake_constants(mat) -> bool:
+    """Write the network's prediction for the current parameters into the Lamina node's ``MS`` inputs (linked
+    ones, e.g. driven by baked textures, are left alone) and record the bake key. Returns whether anything
+    changed; a material without multiple scattering only loses its bake key."""
+    model_id, p = current_params(mat)
+    node = shader_node(mat)
+    if not p.multiple_scattering or node is None:
+        return mat.pop(MS_KEY, None) is not None
+    changed = _write_values(node, MAPPINGS[model_id].ms_values(p))
+    key = ms_key(model_id, p)
+    if mat.get(MS_KEY) != key:
+        mat[MS_KEY], changed = key, True
+    return changed
+
+
+def ms_enabled(mat) -> bool:
+    """Whether a Lamina material has multiple scattering on (reads the stored flag only: cheap)."""
+    return is_lamina(mat) and bool(info(mat)["params"].get("multiple_scattering"))
+
+
+def ms_is_stale(mat) -> bool:
+    """Whether the parameters changed since the multiple-scattering inputs were last baked."""
+    model_id, p = current_params(mat)
+    return p.multiple_scattering and shader_node(mat) is not None and mat.get(MS_KEY) != ms_key(model_id, p)
+
+
+def ms_energy_share(mat) -> float:
+    """The network's share of multiple scattering in the energy the material sends back and through for light
+    along the normal (white furnace, mean over RGB), cached per bake key (the first call for a stack takes
+    about 0.1 s). Raises ParamError for stacks no network covers."""
+    model_id, p = current_params(mat)
+    p = MODELS[model_id].validate({**p.to_dict(), "multiple_scattering": True}).params
+    key = ms_key(model_id, p)
+    if key not in _ms_shares:
+        reference = importlib.import_module(f"..reference.{model_id}", __package__)
+        normal = [[0.0, 0.0, 1.0]]
+        total = float(reference.furnace_albedo(p, normal).mean())
+        single = float(reference.furnace_albedo(replace(p, multiple_scattering=False), normal).mean())
+        _ms_shares[key] = max(total - single, 0.0) / total if total > 0 else 0.0
+    return _ms_shares[key]
 
 
 def shader_node(mat):
@@ -190,10 +263,23 @@ def _socket_key(node, name: str) -> str:
     return name if node.bl_idname != "ShaderNodeScript" else "".join(c if c.isalnum() else "_" for c in name)
 
 
-def _write_values(node, values: dict) -> None:
+def _write_values(node, values: dict) -> bool:
+    """Set the node's unlinked inputs (a linked one is driven by its link); True if any value changed. Equal
+    values are not rewritten, so a repeated bake triggers no depsgraph update."""
+    changed = False
     for name, value in values.items():
         socket = node.inputs[_socket_key(node, name)]
-        socket.default_value = _socket_value(value, socket.default_value)
+        new = _socket_value(value, socket.default_value)
+        if socket.is_linked or _same(socket.default_value, new):
+            continue
+        socket.default_value = new
+        changed = True
+    return changed
+
+
+def _same(current, new) -> bool:
+    pairs = zip(current, new) if hasattr(current, "__len__") else [(current, new)]
+    return all(math.isclose(a, b, rel_tol=1e-6, abs_tol=1e-9) for a, b in pairs)
 
 
 def _read_socket(node, s):

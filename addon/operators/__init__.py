@@ -1,13 +1,16 @@
 """Blender operators, CLI registration and the window-manager settings they use."""
 import bpy
 
-from . import compare_op, material_ops
+from . import bake_ops, compare_op, material_ops, ms_ops
 
 classes = (
     compare_op.LaminaCompareSettings,
     material_ops.LAMINA_OT_add_spongecake,
     material_ops.LAMINA_OT_set_form,
+    ms_ops.LAMINA_OT_set_multiple_scattering,
+    ms_ops.LAMINA_OT_rebake,
     compare_op.LAMINA_OT_compare,
+    bake_ops.LAMINA_OT_bake_textures,
 )
 
 _cli_handle = None
@@ -25,6 +28,7 @@ def register():
             bpy.utils.unregister_class(cls)
         raise
     bpy.types.WindowManager.lamina_compare = bpy.props.PointerProperty(type=compare_op.LaminaCompareSettings)
+    ms_ops.register()
     if hasattr(bpy.utils, "register_cli_command"):
         from .. import cli
 
@@ -36,6 +40,7 @@ def unregister():
     if _cli_handle is not None:
         bpy.utils.unregister_cli_command(_cli_handle)
         _cli_handle = None
+    ms_ops.unregister()
     del bpy.types.WindowManager.lamina_compare
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

@@ -43,6 +43,9 @@ class LAMINA_OT_add_spongecake(bpy.types.Operator):
     layer_4: bpy.props.EnumProperty(name="Layer 4", items=LAYER_ITEMS, default="surface")
     substrate: bpy.props.EnumProperty(name="Substrate", items=SUBSTRATE_ITEMS, default="none")
     delta_transmission: bpy.props.BoolProperty(name="Delta transmission", default=False)
+    multiple_scattering: bpy.props.BoolProperty(
+        name="Multiple scattering", default=False,
+        description="Add the network-predicted multiple scattering (stacks of 1 or 2 layers)")
     form: bpy.props.EnumProperty(name="Form", items=FORM_ITEMS, default="nodes")
 
     @classmethod
@@ -63,7 +66,15 @@ class LAMINA_OT_add_spongecake(bpy.types.Operator):
             col.prop(self, f"layer_{k + 1}")
         col.prop(self, "substrate")
         col.prop(self, "delta_transmission")
+        row = layout.row()
+        row.enabled = self._layer_count() <= model.MS_MAX_LAYERS
+        row.prop(self, "multiple_scattering")
+        if not row.enabled:
+            layout.label(text=f"Multiple scattering needs 1 or {model.MS_MAX_LAYERS} layers", icon="INFO")
         layout.prop(self, "form", expand=True)
+
+    def _layer_count(self) -> int:
+        return self.layers if self.preset == SCRATCH else len(presets.load(model.ID, self.preset)["layers"])
 
     def execute(self, context):
         if self.preset == SCRATCH:
@@ -71,6 +82,10 @@ class LAMINA_OT_add_spongecake(bpy.types.Operator):
             data, name = scratch_dict(self.layers, types, self.substrate, self.delta_transmission), "SpongeCake"
         else:
             data, name = presets.load(model.ID, self.preset), f"SpongeCake {self.preset}"
+        ms_possible = self._layer_count() <= model.MS_MAX_LAYERS
+        data["multiple_scattering"] = self.multiple_scattering and ms_possible
+        if self.multiple_scattering and not ms_possible:
+            self.report({"WARNING"}, f"Multiple scattering needs 1 or {model.MS_MAX_LAYERS} layers: left off")
         try:
             validated = model.validate(data)
         except ParamError as e:

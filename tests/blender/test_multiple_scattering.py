@@ -1,0 +1,230 @@
+"""Multiple scattering as an artist uses it: toggled on and off, baked into the Lamina node, re-baked by hand and
+automatically (debounced), refused for 3-layer stacks, drawn in the panel and rendered by Cycles as predicted.
+Predicted values always come from the bake module (the shipped weights change with training)."""
+from dataclasses import replace
+
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+import addon  # noqa: E402
+from addon import presets  # noqa: E402
+from addon.models import spongecake as model  # noqa: E402
+from addon.models.params import ParamError  # noqa: E402
+from addon.nodes import MAPPINGS, material, predicted_image  # noqa: E402
+from addon.nodes.spongecake import ms_values  # noqa: E402
+from addon.operators import ms_ops  # noqa: E402
+from addon.operators.cycles_render import render_cycles  # noqa: E402
+from addon.reference import metrics  # noqa: E402
+from addon.reference import scenes as S  # noqa: E402
+
+pytestmark = pytest.mark.blender
+# two bright surface layers: much of the light scatters more than once
+BRIGHT = {"layers": [{"type": "surface", "roughness": 0.5, "albedo": [0.95, 0.95, 0.95], "thickness": 1.0},
+                     {"type": "surface", "roughness": 0.5, "albedo": [0.95, 0.95, 0.95], "thickness": 3.0}]}
+
+
+@pytest.fixture(autouse=True)
+def registered():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    addon.register()
+    yield
+    addon.unregister()
+
+
+@pytest.fixture
+def sphere():
+    obj = bpy.data.objects.new("ball", bpy.data.meshes.new("ball"))
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    return obj
+
+
+def _preset(name, **changes):
+    return model.params_from_dict({**presets.load(model.ID, name), **changes})
+
+
+def _inputs(mat, baked):
+    """Socket name -> value of the Lamina node's model inputs (``baked=False``) or its MS inputs."""
+    _, p = material.current_params(mat)
+    node = material.shader_node(mat)
+    return {s.name: material._read_socket(node, s) for s in MAPPINGS[model.ID].sockets(p) if s.baked == baked}
+
+
+def _assert_ms_inputs_are_the_prediction(mat):
+    _, p = material.current_params(mat)
+    expected = ms_values(p)
+    got = _inputs(mat, baked=True)
+    assert set(got) == set(expected)
+    for name, value in expected.items():
+        assert got[name] == pytest.approx(value, rel=1e-6, abs=1e-7), name
+
+
+def _set_thickness(mat, value):
+    node = material.shader_node(mat)
+    node.inputs[material._socket_key(node, "L1 Thickness")].default_value = value
+
+
+@pytest.mark.parametrize("form", material.FORMS)
+def test_toggling_keeps_parameter_values_and_form(form):
+    mat = material.new_material(model.ID, _preset("fabric"), form)
+    _set_thickness(mat, 0.75)
+    _, before = material.current_params(mat)
+    material.set_multiple_scattering(mat, True)
+    assert material.form_of(mat) == form and material.ms_enabled(mat)
+    assert material.current_params(mat)[1] == replace(before, multiple_scattering=True)
+    _assert_ms_inputs_are_the_prediction(mat)
+    assert not material.ms_is_stale(mat)
+    material.set_multiple_scattering(mat, False)
+    assert material.form_of(mat) == form and not material.ms_enabled(mat)
+    assert material.current_params(mat)[1] == before
+    assert _inputs(mat, baked=True) == {} and "lamina_ms_key" not in mat.keys()
+
+
+def test_new_material_records_its_bake_and_switching_form_keeps_it():
+    mat = material.new_material(model.ID, _preset("plastic", multiple_scattering=True), "nodes")
+    assert not material.ms_is_stale(mat)
+    _assert_ms_inputs_are_the_prediction(mat)
+    material.set_form(mat, "osl")
+    assert not material.ms_is_stale(mat)
+    _assert_ms_inputs_are_the_prediction(mat)
+
+
+def test_a_parameter_edit_makes_the_bake_stale_and_rebake_writes_the_new_prediction():
+    mat = material.new_material(model.ID, _preset("fabric", multiple_scattering=True), "nodes")
+    old = _inputs(mat, baked=True)
+    _set_thickness(mat, 3.0)
+    assert material.ms_is_stale(mat)
+    assert material.bake_constants(mat)
+    assert not material.ms_is_stale(mat)
+    _assert_ms_inputs_are_the_prediction(mat)
+    assert _inputs(mat, baked=True) != old
+    assert not material.bake_constants(mat)  # nothing left to change
+
+
+def test_rebake_leaves_linked_inputs_alone():
+    mat = material.new_material(model.ID, _preset("fabric", multiple_scattering=True), "nodes")
+    node = material.shader_node(mat)
+    texture = mat.node_tree.nodes.new("ShaderNodeValue")
+    mat.node_tree.links.new(texture.outputs[0], node.inputs["MS L1 Thickness"])
+    node.inputs["MS L1 Thickness"].default_value = 123.0
+    _set_thickness(mat, 3.0)
+    assert material.bake_constants(mat)
+    assert node.inputs["MS L1 Thickness"].default_value == 123.0
+    expected = ms_values(material.current_params(mat)[1])["MS L1 Albedo"]
+    assert tuple(node.inputs["MS L1 Albedo"].default_value)[:3] == pytest.approx(expected, rel=1e-6, abs=1e-7)
+
+
+def test_three_layer_stack_is_refused_and_left_untouched():
+    mat = material.new_material(model.ID, _preset("leaf"), "nodes")
+    before = (mat["lamina"], [n.name for n in mat.node_tree.nodes], _inputs(mat, baked=False))
+    with pytest.raises(ParamError, match="1 or 2 layers"):
+        material.set_multiple_scattering(mat, True)
+    assert (mat["lamina"], [n.name for n in mat.node_tree.nodes], _inputs(mat, baked=False)) == before
+    with bpy.context.temp_override(material=mat), pytest.raises(RuntimeError, match="1 or 2 layers"):
+        bpy.ops.lamina.set_multiple_scattering(enabled=True)  # reported as an error
+    assert not material.ms_enabled(mat)
+
+
+def test_operators_add_toggle_and_rebake(sphere):
+    assert bpy.ops.lamina.add_spongecake(preset="fabric", multiple_scattering=True) == {"FINISHED"}
+    mat = sphere.active_material
+    assert material.ms_enabled(mat) and not material.ms_is_stale(mat)
+    _set_thickness(mat, 3.0)
+    with bpy.context.temp_override(material=mat):
+        assert bpy.ops.lamina.rebake() == {"FINISHED"}
+        assert not material.ms_is_stale(mat)
+        assert bpy.ops.lamina.set_multiple_scattering(enabled=False) == {"FINISHED"}
+    assert not material.ms_enabled(mat)
+    # a 3-layer preset: the dialog's (disabled) checkbox is left off, with a warning
+    assert bpy.ops.lamina.add_spongecake(preset="leaf", multiple_scattering=True) == {"FINISHED"}
+    assert not material.ms_enabled(sphere.active_material)
+
+
+def test_auto_rebake_is_debounced_and_does_not_loop(sphere):
+    bpy.ops.lamina.add_spongecake(preset="fabric", multiple_scattering=True)
+    mat = sphere.active_material
+    bpy.context.view_layer.update()
+    assert not bpy.app.timers.is_registered(ms_ops.rebake_stale)
+    _set_thickness(mat, 3.0)
+    bpy.context.view_layer.update()  # runs depsgraph_update_post
+    assert bpy.app.timers.is_registered(ms_ops.rebake_stale)
+    _set_thickness(mat, 4.0)
+    bpy.context.view_layer.update()
+    assert bpy.app.timers.is_registered(ms_ops.rebake_stale)  # still one pending call, pushed back
+    bpy.app.timers.unregister(ms_ops.rebake_stale)
+    ms_ops.rebake_stale()  # what the timer does 0.3 s after the last edit (no event loop in background mode)
+    assert not material.ms_is_stale(mat)
+    _assert_ms_inputs_are_the_prediction(mat)
+    bpy.context.view_layer.update()  # the values the bake wrote: not stale, nothing scheduled
+    assert not bpy.app.timers.is_registered(ms_ops.rebake_stale)
+    bpy.context.window_manager.lamina_auto_rebake = False
+    _set_thickness(mat, 5.0)
+    bpy.context.view_layer.update()
+    assert not bpy.app.timers.is_registered(ms_ops.rebake_stale) and material.ms_is_stale(mat)
+
+
+def test_unregister_removes_the_handler_and_a_pending_rebake(sphere):
+    bpy.ops.lamina.add_spongecake(preset="fabric", multiple_scattering=True)
+    _set_thickness(sphere.active_material, 3.0)
+    bpy.context.view_layer.update()
+    assert bpy.app.timers.is_registered(ms_ops.rebake_stale)
+    addon.unregister()
+    try:
+        assert not bpy.app.timers.is_registered(ms_ops.rebake_stale)
+        assert ms_ops.on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post
+        assert not hasattr(bpy.types.WindowManager, "lamina_auto_rebake")
+    finally:
+        addon.register()
+
+
+def test_energy_share_is_the_furnace_difference():
+    from addon.reference import spongecake as reference
+
+    mat = material.new_material(model.ID, _preset("fabric", multiple_scattering=True), "nodes")
+    _, p = material.current_params(mat)
+    total = reference.furnace_albedo(p, [[0.0, 0.0, 1.0]]).mean()
+    single = reference.furnace_albedo(replace(p, multiple_scattering=False), [[0.0, 0.0, 1.0]]).mean()
+    assert material.ms_energy_share(mat) == pytest.approx((total - single) / total)
+    with pytest.raises(ParamError):
+        material.ms_energy_share(material.new_material(model.ID, _preset("leaf"), "nodes"))
+
+
+def _panel_text(mat):
+    """Everything LAMINA_PT_main draws for ``mat``, as one string."""
+    from addon.ui import panels
+    from test_operators import _Layout
+
+    log = []
+    context = type("Ctx", (), {"material": mat, "scene": bpy.context.scene,
+                               "window_manager": bpy.context.window_manager})()
+    panels.LAMINA_PT_main.draw(type("P", (), {"layout": _Layout(log)})(), context)
+    return " ".join(f"{a} {k.get('text', '')}" for _, a, k in log)
+
+
+def test_panel_shows_toggle_share_stale_warning_and_rebake():
+    mat = material.new_material(model.ID, _preset("fabric", multiple_scattering=True), "nodes")
+    text = _panel_text(mat)
+    assert "lamina.set_multiple_scattering" in text and "lamina_auto_rebake" in text and "lamina.rebake" in text
+    assert f"Multiple scattering: {material.ms_energy_share(mat):.0%} of the leaving energy" in text
+    assert ("lamina.bake_textures" in text) == hasattr(bpy.types, "LAMINA_OT_bake_textures")
+    _set_thickness(mat, 3.0)
+    assert "Parameters changed since the last bake" in _panel_text(mat)
+    text = _panel_text(material.new_material(model.ID, _preset("leaf"), "nodes"))
+    assert "Multiple scattering needs 1 or 2 layers" in text and "lamina.rebake" not in text
+
+
+@pytest.mark.parametrize("form", material.FORMS)
+def test_cycles_renders_the_predicted_multiple_scattering(form, tmp_path):
+    single = model.params_from_dict(BRIGHT)
+    multiple = replace(single, multiple_scattering=True)
+    for spec, samples in ((S.sphere_scene(resolution=40), 32), (S.furnace_scene(resolution=(24, 12)), 128)):
+        mask = S.scene_mask(spec)
+        images = {}
+        for p in (single, multiple):
+            mat = material.new_material(model.ID, p, form)
+            images[p], _ = render_cycles(mat, spec, samples, 0, str(tmp_path / f"{spec.name}.exr"))
+            predicted = predicted_image(model.ID, p, form, spec)
+            err = metrics.rmse(images[p], predicted, mask) / max(predicted[mask].mean(), 1e-3)
+            assert err < 0.02, f"{form} {spec.name} ms={p.multiple_scattering}: {err:.4f}"
+        assert images[multiple][mask].mean() > images[single][mask].mean(), spec.name
