@@ -5,7 +5,8 @@ outputs (``addon.bake.spongecake`` documents the encoding). SiLU rather than ReL
 are then smooth (C-infinity) functions of the layer parameters, so texture-driven bakes vary smoothly between
 texels, and no unit dies on a small dataset. Loss: MAE between the Monte Carlo multiple-scattering lobe and
 W1 f_ss(params') + W2 / pi, both times |cos wo| (the differentiable ``training.spongecake_torch.eval_stack``),
-Adam, learning rate 1e-3 with cosine decay, mini-batches of 32 configurations (every direction pair of a
+AdamW (weight decay 1e-4), learning rate 1e-3 with cosine decay, the checkpoint with the best split-validation
+loss kept, mini-batches of 32 configurations (every direction pair of a
 configuration in the same batch). 10% of the configurations are held out for validation; the shipped,
 independently seeded validation set (tests/data) is scored at export and its errors go into the manifest.
 
@@ -32,6 +33,8 @@ from training import dataset
 from training.spongecake_torch import LayerBatch, eval_stack
 
 HIDDEN = (128, 128, 128)
+LEARNING_RATE = 1e-3
+WEIGHT_DECAY = 1e-4  # AdamW; a few hundred configurations per network, so keep the 3x128 MLP from memorising them
 ENERGY_FLOOR = 1e-3  # about the median configuration's mean f |cos wo| of multiple scattering in the dataset
 VALIDATION_SET = Path(__file__).resolve().parents[1] / "tests" / "data" / "spongecake_ms_validation"
 
@@ -132,37 +135,43 @@ def lobe_errors(net, data: dict) -> dict:
 # ------------------------------------------------------------------------------------------- training
 
 def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int = 32, log=print):
+    """Train for ``minutes``; returns the network at its best split-validation loss (checked every few seconds)
+    and what happened."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     order = rng.permutation(len(data["rows"]))
     n_val = max(1, len(order) // 10)
     val, train_idx = order[:n_val], order[n_val:]
     net = make_network(n_layers)
-    opt = torch.optim.Adam(net.parameters(), lr=1e-3)
-    start, step, epoch, last_log = time.time(), 0, 0, -math.inf
+    opt = torch.optim.AdamW(net.parameters(), lr=LEARNING_RATE, weight_decay=WEIGHT_DECAY)
+    start, step, epoch, last_check, last_log = time.time(), 0, 0, -math.inf, -math.inf
+    best = (math.inf, None, 0)
     budget = minutes * 60.0
     while time.time() - start < budget:
         epoch += 1
         shuffled = rng.permutation(train_idx)
         for i in range(0, len(shuffled), batch):
-            idx = shuffled[i:i + batch]
             frac = min(1.0, (time.time() - start) / budget)
             for group in opt.param_groups:
-                group["lr"] = 1e-3 * 0.5 * (1.0 + math.cos(math.pi * frac)) + 1e-5
-            loss = lobe_loss(net, data, idx)
+                group["lr"] = LEARNING_RATE * 0.5 * (1.0 + math.cos(math.pi * frac)) + 1e-5
+            loss = lobe_loss(net, data, shuffled[i:i + batch])
             opt.zero_grad()
             loss.backward()
             opt.step()
             step += 1
-            if time.time() - start > budget:
-                break
-        if time.time() - last_log > 30.0:
-            last_log = time.time()
+        if time.time() - last_check > min(5.0, budget / 20):
+            last_check = time.time()
             with torch.no_grad():
-                val_loss = lobe_loss(net, data, val)
-            log(f"  {n_layers} layer(s) epoch {epoch} step {step}: train MAE {loss.item():.3e}, "
-                f"validation MAE {val_loss.item():.3e}  ({time.time() - start:.0f} s)")
-    return net, {"epochs": epoch, "steps": step, "seconds": round(time.time() - start, 1),
+                val_loss = lobe_loss(net, data, val).item()
+            if val_loss < best[0]:
+                best = (val_loss, {k: v.clone() for k, v in net.state_dict().items()}, step)
+            if time.time() - last_log > 30.0:
+                last_log = time.time()
+                log(f"  {n_layers} layer(s) epoch {epoch} step {step}: train loss {loss.item():.3e}, "
+                    f"validation loss {val_loss:.3e} (best {best[0]:.3e})  ({time.time() - start:.0f} s)", flush=True)
+    if best[1] is not None:
+        net.load_state_dict(best[1])
+    return net, {"epochs": epoch, "steps": step, "best_step": best[2], "seconds": round(time.time() - start, 1),
                  "train_configs": int(len(train_idx)), "split_validation_configs": int(n_val), "val_index": val}
 
 
@@ -188,7 +197,7 @@ def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path
         "hidden": list(HIDDEN), "activation": "silu", "outputs": n_layers * ms.OUTPUTS + ms.WEIGHT_OUTPUTS,
         "training_configs": info["train_configs"], "pairs_per_config": int(data["ms"].shape[1] * data["ms"].shape[2]),
         "paths_per_wi": metas[0]["paths"], "max_depth": metas[0]["max_depth"], "dataset_seed": metas[0]["seed"],
-        "dataset_version": metas[0]["version"], "epochs": info["epochs"], "steps": info["steps"],
+        "dataset_version": metas[0]["version"], "epochs": info["epochs"], "steps": info["steps"], "best_step": info["best_step"],
         "training_seconds": info["seconds"], "split_validation": split,
         "date": datetime.date.today().isoformat(), "code_version": code_version(),
     }
