@@ -48,6 +48,13 @@ def build_parser() -> argparse.ArgumentParser:
     bn.add_argument("--out", default="docs")
     bn.add_argument("--samples", type=int, default=64)
     bn.add_argument("--resolution", type=int, default=64)
+    bk = sub.add_parser("bake", help="bake a Lamina material's multiple scattering (per texel where Image Textures "
+                                     "drive its layers) and save the .blend")
+    bk.add_argument("--blend", required=True, help="the .blend to open")
+    bk.add_argument("--material", required=True, help="the Lamina material to bake")
+    bk.add_argument("--out", help="the .blend to write (refused if it exists, see --overwrite)")
+    bk.add_argument("--overwrite", action="store_true",
+                    help="replace an existing --out; without --out, save over --blend")
     return ap
 
 
@@ -152,8 +159,32 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_bake(args) -> int:
+    blend = os.path.abspath(args.blend)
+    if not os.path.isfile(blend):
+        raise CliError(f"{blend} does not exist")
+    if args.out is None and not args.overwrite:
+        raise CliError("pass --out FILE, or --overwrite to save over --blend")
+    out = os.path.abspath(args.out or args.blend)
+    if os.path.exists(out) and not args.overwrite:
+        raise CliError(f"{out} exists; pass --overwrite to replace it")
+    from .operators import bake_ops
+
+    try:
+        summary, warnings = bake_ops.bake_file(blend, args.material, out)
+    except bake_ops.MaterialError as e:
+        raise CliError(str(e)) from None
+    except bake_ops.BakeError as e:  # the textures: nothing was written
+        print(f"lamina: error: {e}", file=sys.stderr)
+        return 1
+    for w in warnings:
+        print(f"lamina: warning: {w}", file=sys.stderr)
+    print(f"lamina: {summary}; wrote {out}")
+    return 0
+
 COMMANDS = {"list-presets": cmd_list_presets, "make-material": cmd_make_material, "compare": cmd_compare,
-            "demo": cmd_demo, "bench": cmd_bench}
+            "demo": cmd_demo, "bench": cmd_bench,
+            "bake": cmd_bake}
 
 
 def main(argv=None) -> int:

@@ -228,6 +228,22 @@ def texel_rows(p: model.Params, inputs: dict, labels=None, warnings=None):
 
 # ---------------------------------------------------------------------------------------------- bake
 
+def synthetic_inputs(p: model.Params, size: int, seed: int = 0) -> dict:
+    """Every texturable layer input of ``p`` driven by a random size x size texture around the layer's value,
+    inside the parameter ranges (benchmarks time ``bake_maps`` on these without Blender)."""
+    rng = np.random.default_rng(seed)
+    inputs = {}
+    for k, name in texturable_inputs(p):
+        value = np.asarray(getattr(p.layers[k], name), dtype=np.float64)
+        if name == "albedo":
+            inputs[k, name] = rng.uniform(0.2, 0.9, (size, size, 3))
+        elif name == "orientation":
+            inputs[k, name] = value + 0.2 * rng.standard_normal((size, size, 3))
+        else:
+            inputs[k, name] = np.clip(value * rng.uniform(0.5, 1.0, (size, size)), *_range(p.layers[k], name))
+    return inputs
+
+
 def bake_steps(p: model.Params, inputs: dict, labels=None, warnings=None, chunk: int = CHUNK):
     """A generator: validates (on the first ``next``), then runs the network one chunk per step, yielding
     the fraction done; its return value (``StopIteration.value``) is ``{map name: H x W x 4 float32}``."""

@@ -25,6 +25,7 @@ def test_list_presets_prints_every_preset():
     (("compare", "--preset", "fabric", "--scenes", "moon", "--out", "x"), "unknown scene moon"),
     (("compare", "--preset", "fabric", "--forms", "glsl", "--out", "x"), "unknown form glsl"),
     (("compare", "--preset", "fabric", "--samples", "0", "--out", "x"), "--samples"),
+    (("bake", "--blend", "missing.blend", "--material", "M", "--out", "x.blend"), "missing.blend does not exist"),
 ])
 def test_bad_arguments_exit_2_with_one_line(args, reason):
     r = lamina(*args)

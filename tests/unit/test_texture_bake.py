@@ -213,3 +213,12 @@ def test_colour_helpers_match_cycles_conventions():
     assert up[0, 1] == pytest.approx(0.25)  # a quarter of the way from texel 0 to texel 1
     rgb = textures.resample(np.dstack([a, a, a]), (1, 2))
     assert rgb.shape == (1, 2, 3)
+
+
+def test_synthetic_inputs_bake_without_warnings():
+    """What the benchmark times: every texturable input driven, all values in range."""
+    p, warnings = _params(), []
+    inputs = textures.synthetic_inputs(p, 16)
+    assert set(inputs) == set(textures.texturable_inputs(p))
+    maps = textures.bake_maps(p, inputs, warnings=warnings)
+    assert warnings == [] and all(m.shape == (16, 16, 4) and np.isfinite(m).all() for m in maps.values())

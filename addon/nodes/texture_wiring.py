@@ -1,0 +1,229 @@
+"""Texture-driven Lamina layers in Blender: find the Image Textures linked into the Lamina node's layer inputs,
+read their pixels as Cycles sees them, and wire baked multiple-scattering maps into its ``MS`` inputs.
+
+Reading (``read_source``): ``Image.pixels`` rows start at the BOTTOM; they are flipped so that row 0 is the
+top, like ``bake.exr`` and ``bake.textures``. Float images hold scene-linear values in memory whatever their
+colour space (Blender converts them on load) and Non-Color images raw data, so both are used as they are;
+8-bit images hold the file's values, so an sRGB one is linearised as Cycles does (the sRGB transfer function)
+and a linear one used as it is; other colour spaces are refused. A Color output linked to a float input
+becomes its Rec.709 luminance, an Alpha output linked to a colour or vector input a grey, as Cycles converts
+them (the scene-linear space is assumed to be Blender's default, Rec.709).
+
+Wiring (``wire``): one Image Texture node per map (``bake.textures.map_layout``), tagged ``node["lamina_bake"]``,
+loaded as Non-Color with channel-packed alpha so RGB and A stay raw, sharing the source textures' Vector input
+(their default UV map when it is unlinked) and interpolation; the Color output feeds a colour/vector ``MS``
+input, Alpha a float one, and a Separate Color node (also tagged) floats stored in R, G or B. Re-wiring
+replaces only tagged nodes; everything is created before anything is removed or linked.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import bpy
+import numpy as np
+
+from ..bake import textures
+from ..bake.textures import BakeError
+from ..models import spongecake as model
+from . import MAPPINGS
+from . import material as lamina_material
+
+TAG = "lamina_bake"
+LINEAR_SPACES = ("Linear Rec.709", "Working Space")  # 8-bit images in these hold linear values
+KINDS = {p.name: p.kind for p in model.LAYER}
+
+
+@dataclass(frozen=True)
+class Source:
+    """An Image Texture output linked into a texturable layer input of the Lamina node."""
+
+    key: tuple  # (layer index, parameter name): a bake.textures input key
+    socket: str  # the shader input, e.g. "L1 Albedo"
+    node: object  # the ShaderNodeTexImage
+    output: str  # "Color" or "Alpha"
+
+    @property
+    def label(self) -> str:
+        image = self.node.image
+        return f"image {image.name!r} ({self.socket})" if image else f"node {self.node.name!r} ({self.socket})"
+
+
+def _input(node, name: str):
+    return node.inputs[lamina_material._socket_key(node, name)]
+
+
+def linked_from(socket):
+    """The output socket feeding ``socket`` (through reroutes), or None when unlinked or the link is muted."""
+    while socket.is_linked:
+        link = socket.links[0]
+        if link.is_muted:
+            return None
+        if link.from_node.bl_idname != "NodeReroute":
+            return link.from_socket
+        socket = link.from_node.inputs[0]
+    return None
+
+
+def sources(mat) -> list[Source]:
+    """The Image Textures driving the layer inputs of a Lamina material's node; BakeError for a layer input
+    driven by anything a bake cannot follow (another node type, an input that is not texturable)."""
+    model_id, p = lamina_material.current_params(mat)
+    node = lamina_material.shader_node(mat)
+    allowed = textures.texturable_inputs(p)
+    found = []
+    for s in MAPPINGS[model_id].sockets(p):
+        if s.baked or s.layer is None:  # substrate inputs do not enter the multiple-scattering prediction
+            continue
+        output = linked_from(_input(node, s.name))
+        if output is None:
+            continue
+        key = (s.layer, s.param.name)
+        if key not in allowed:
+            raise BakeError(f"{mat.name}: {s.name} is linked, but with multiple scattering only "
+                            f"{', '.join(allowed.values())} can be driven by textures")
+        if output.node.bl_idname != "ShaderNodeTexImage":
+            raise BakeError(f"{mat.name}: {s.name} is driven by a {output.node.bl_label} node; Lamina bakes only "
+                            f"Image Texture nodes linked directly (bake that node into an image first)")
+        found.append(Source(key, s.name, output.node, output.name))
+    return found
+
+
+def read_source(source: Source) -> np.ndarray:
+    """The values an input receives from its texture (module docstring): H x W or H x W x 3, row 0 = top."""
+    image = source.node.image
+    if image is None:
+        raise BakeError(f"{source.label}: the Image Texture node has no image")
+    if image.source not in ("FILE", "GENERATED"):
+        raise BakeError(f"{source.label}: {image.source.lower()} images cannot be baked; use a single image")
+    w, h = image.size
+    if w == 0 or h == 0 or len(image.pixels) == 0:
+        path = bpy.path.abspath(image.filepath) if image.filepath else "(no file path)"
+        raise BakeError(f"{source.label}: the image has no pixels: the file {path} is missing or unreadable")
+    c = image.channels
+    px = np.empty(w * h * c, dtype=np.float32)
+    image.pixels.foreach_get(px)
+    px = px.reshape(h, w, c)[::-1]  # Blender's rows start at the bottom
+    if source.output == "Alpha":
+        value = px[:, :, 3] if c == 4 else np.ones((h, w), dtype=np.float32)
+    else:
+        value = _linear(image, px[:, :, :3] if c >= 3 else np.repeat(px[:, :, :1], 3, axis=2), source.label)
+    if KINDS[source.key[1]] == "float":
+        return textures.luminance(value) if value.ndim == 3 else value
+    return value if value.ndim == 3 else np.repeat(value[:, :, None], 3, axis=2)
+
+
+def _linear(image, rgb, label: str):
+    space = image.colorspace_settings
+    if image.is_float or space.is_data or space.name in LINEAR_SPACES:
+        return rgb
+    if space.name == "sRGB":
+        return textures.srgb_to_linear(rgb)
+    raise BakeError(f"{label}: colour space {space.name!r} cannot be baked; use sRGB, Linear Rec.709 or "
+                    f"Non-Color")
+
+
+def read_inputs(found: list[Source], warnings: list[str]) -> dict:
+    """{input key: values} at one size: the largest width and the largest height among the textures; a smaller
+    texture is resampled (bilinear, or nearest for Closest interpolation) with a warning."""
+    values = {s.key: read_source(s) for s in found}
+    size = tuple(max(v.shape[i] for v in values.values()) for i in (0, 1))
+    for s in found:
+        if values[s.key].shape[:2] != size:
+            h, w = values[s.key].shape[:2]
+            warnings.append(f"{s.label}: resampled from {w} x {h} to {size[1]} x {size[0]} (the largest size)")
+            values[s.key] = textures.resample(values[s.key], size, nearest=s.node.interpolation == "Closest")
+    return values
+
+
+def vector_source(found: list[Source]):
+    """The output socket feeding the textures' Vector inputs (None: their default UV map); BakeError when they
+    differ, since one baked texel must correspond to one source texel."""
+    feeds = {s.node.name: linked_from(s.node.inputs["Vector"]) for s in found}
+    distinct = {(f.node.name, f.identifier) if f is not None else None for f in feeds.values()}
+    if len(distinct) > 1:
+        raise BakeError(f"the textures {', '.join(sorted(feeds))} use different Vector inputs; Lamina bakes "
+                        f"textures that share one mapping (link the same UV/Mapping node to all of them)")
+    return next(iter(feeds.values()))
+
+
+def baked_nodes(mat) -> list:
+    return [n for n in mat.node_tree.nodes if n.get(TAG)]
+
+
+def unwire(mat) -> None:
+    """Remove Lamina's baked texture nodes (and images no one else uses); the user's nodes stay."""
+    _remove(mat, baked_nodes(mat), keep=set())
+
+
+def _remove(mat, nodes, keep: set) -> None:
+    images = {n.image.name for n in nodes if getattr(n, "image", None) is not None} - keep
+    for n in nodes:
+        mat.node_tree.nodes.remove(n)
+    for name in images:
+        image = bpy.data.images.get(name)
+        if image is not None and image.users == 0:
+            bpy.data.images.remove(image)
+
+
+def _load_map(path: str):
+    image = bpy.data.images.load(path, check_existing=True)
+    image.colorspace_settings.name = "Non-Color"
+    image.alpha_mode = "CHANNEL_PACKED"
+    if bpy.data.filepath:
+        try:
+            image.filepath = bpy.path.relpath(path)  # moves with the project folder
+        except ValueError:  # another drive (Windows): keep the absolute path
+            pass
+    return image
+
+
+def wire(mat, layout: dict, paths: dict, found: list[Source]) -> None:
+    """Feed the Lamina node's ``MS`` inputs from the baked maps, replacing earlier baked nodes."""
+    tree = mat.node_tree
+    node = lamina_material.shader_node(mat)
+    if node is None:
+        raise BakeError(f"{mat.name} has no Lamina node any more; nothing was wired")
+    vector = vector_source(found)
+    template = found[0].node
+    images = {name: _load_map(paths[name]) for name in layout}
+    old = baked_nodes(mat)
+    created, links = [], []
+
+    def new(kind, location):
+        n = tree.nodes.new(kind)
+        n[TAG] = True
+        n.location = location
+        created.append(n)
+        return n
+
+    try:
+        x, y = node.location.x - 560, node.location.y
+        for i, (name, channels) in enumerate(layout.items()):
+            tex = new("ShaderNodeTexImage", (x, y - 300 * i))
+            tex.image = images[name]
+            tex.label = f"Lamina bake: {name}"
+            tex.interpolation, tex.projection, tex.extension = (template.interpolation, template.projection,
+                                                                template.extension)
+            if vector is not None:
+                tree.links.new(vector, tex.inputs["Vector"])
+            separate = None
+            for c, entry in enumerate(channels):
+                if entry is None or entry[1] > 0:  # unused, or the G/B of a colour already linked
+                    continue
+                target = _input(node, entry[0])
+                if c == 3:
+                    links.append((tex.outputs["Alpha"], target))
+                elif channels[c:c + 3] == tuple((entry[0], k) for k in range(3)):  # a colour or vector input
+                    links.append((tex.outputs["Color"], target))
+                else:  # a float stored in R, G or B
+                    if separate is None:
+                        separate = new("ShaderNodeSeparateColor", (x + 300, y - 300 * i))
+                        tree.links.new(tex.outputs["Color"], separate.inputs[0])
+                    links.append((separate.outputs[c], target))
+    except BaseException:
+        for n in created:
+            tree.nodes.remove(n)
+        raise
+    _remove(mat, old, keep={image.name for image in images.values()})
+    for output, target in links:
+        tree.links.new(output, target)
