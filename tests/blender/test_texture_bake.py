@@ -34,6 +34,7 @@ CASES = {
     "albedo": ("srgb-png", (200, 60, 30), (40, 120, 220), (255, 255, 255)),
     "thickness": ("exr", 0.3, 3.0, 8.0),
     "roughness": ("data-png", (80, 40, 20), (200, 230, 150), (255, 255, 255)),  # colour → float: luminance
+    "orientation": ("exr", (0.5, 0.0, 0.866), (-0.4, 0.3, 0.5), (0.0, 0.0, 1.0)),  # raw vectors, not unit
 }
 
 
@@ -77,13 +78,13 @@ def _halves(folder, param, size=(H, W), name=None):
     kind, left, right, marker = CASES[param]
     h, w = size
     values = np.empty((h, w, 3))
-    values[:, : w // 2] = left
+    values[:, :w // 2] = left
     values[:, w // 2:] = right
     values[0, 0] = marker
     path = os.path.join(str(folder), (name or f"{param}") + (".exr" if kind == "exr" else ".png"))
     if kind == "exr":
         exr.write_exr(path, np.dstack([values, np.ones((h, w))]).astype(np.float32))
-        received = values[:, :, 0]
+        received = values if np.ndim(left) else values[:, :, 0]
     else:
         exr.write_png(path, np.dstack([values, np.full((h, w), 255)]).astype(np.uint8))
         received = values / 255.0
@@ -201,8 +202,12 @@ def _render_halves(param, form, folder):
     return img, halves, predicted, received
 
 
+TILTED = pytest.mark.xfail(strict=True, reason="tilted flakes: Cycles does not render what the numpy backend "
+                           "predicts for an orientation off the normal, with a constant orientation too (mapping issue)")
+
+
 @pytest.mark.parametrize("form", ["nodes", "osl"])
-@pytest.mark.parametrize("param", sorted(CASES))
+@pytest.mark.parametrize("param", [pytest.param(p, marks=TILTED) if p == "orientation" else p for p in sorted(CASES)])
 def test_cycles_renders_each_half_as_predicted_for_its_parameters(param, form, saved, strong_network):
     img, halves, predicted, received = _render_halves(param, form, saved)
     for half, mask in halves.items():
@@ -399,6 +404,52 @@ def test_the_operator_bakes_and_reports(saved, registered):
         material.shader_node(mat).name = "gone"
         with pytest.raises(RuntimeError, match="has no Lamina node"):
             bpy.ops.lamina.bake_textures()
+
+
+class _WindowManager:
+    """Records what the modal operator asks of the window manager (no window exists in background mode)."""
+
+    def __init__(self):
+        self.calls = []
+
+    def __getattr__(self, name):
+        return lambda *args, **kwargs: self.calls.append(name) or name  # a timer handle for event_timer_add
+
+
+def _modal_operator(mat):
+    """The operator's own invoke/modal/... run on a stand-in instance (bpy only creates operators it runs)."""
+    op = bake_ops.LAMINA_OT_bake_textures
+    methods = {name: getattr(op, name) for name in ("invoke", "modal", "_start", "_finish", "_cleanup")}
+    reports = []
+    instance = type("Op", (), {**methods, "_timer": None, "_run": None,
+                               "report": lambda self, kind, text: reports.append((kind.pop(), text))})()
+    context = type("Ctx", (), {"material": mat, "window_manager": _WindowManager(), "window": None,
+                               "workspace": None})()
+    return instance, context, reports
+
+
+def _event(kind):
+    return type("Event", (), {"type": kind})()
+
+
+@pytest.mark.parametrize("cancel", [False, True])
+def test_the_modal_operator_steps_from_the_timer_and_esc_cancels_cleanly(cancel, saved):
+    path, _ = _halves(saved, "albedo")
+    mat, _ = _material("albedo", path)
+    op, context, reports = _modal_operator(mat)
+    assert op.invoke(context, _event("NONE")) == {"RUNNING_MODAL"}
+    assert op.modal(context, _event("MOUSEMOVE")) == {"PASS_THROUGH"}
+    assert op.modal(context, _event("TIMER")) == {"RUNNING_MODAL"}  # one chunk computed
+    if cancel:
+        assert op.modal(context, _event("ESC")) == {"CANCELLED"}
+        assert reports == [("WARNING", "Bake cancelled: nothing was written or changed")]
+        assert _cache_files(saved) == [] and texture_wiring.baked_nodes(mat) == []
+    else:
+        assert op.modal(context, _event("TIMER")) == {"FINISHED"}
+        assert reports[-1][0] == "INFO" and "Baked" in reports[-1][1] and texture_wiring.baked_nodes(mat)
+    calls = context.window_manager.calls
+    assert calls[:3] == ["progress_begin", "event_timer_add", "modal_handler_add"] and "progress_update" in calls
+    assert calls[-2:] == ["event_timer_remove", "progress_end"]
 
 
 def _blend_with_texture(folder, ms=True):
