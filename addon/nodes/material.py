@@ -4,7 +4,8 @@ Node groups and OSL texts are named with a ``Lamina`` prefix and reused per cont
 operator never duplicates them. Parameter values live on the group or script node's inputs; the model dict
 is kept in the material's ``lamina`` property so the other form can be generated from the current values.
 With multiple scattering, the network's prediction is baked into the node's ``MS`` inputs and the material's
-``lamina_ms_key`` property records which parameters (and networks) it was baked for.
+``lamina_ms_key`` property records which parameters (and networks) it was baked for. Switching form or
+multiple scattering replaces only Lamina's own nodes; the user's nodes and links around them stay (``_replace``).
 """
 from __future__ import annotations
 
@@ -233,34 +234,130 @@ def shader_node(mat):
 
 
 def _build_tree(mat, model_id: str, p, form: str) -> None:
-    """Replace the material's nodes with the Lamina node in ``form``; nothing is touched if generation fails."""
+    """Put the Lamina node in ``form`` into the material, replacing only Lamina's own nodes (``_replace``);
+    nothing is touched if generation fails (the group is built and the OSL compiled first)."""
     if form == "nodes":
         group = node_group(model_id, p)
     else:
         text = osl_text(model_id, p)
         oso = osl.compile_source(text.as_string())
     tree = mat.node_tree
-    _clear(tree)
-    out = tree.nodes["Material Output"]
-    if form == "nodes":
-        node = tree.nodes.new("ShaderNodeGroup")
-        node.node_tree = group
-    else:
-        node = tree.nodes.new("ShaderNodeScript")
-        osl.load_into_script_node(node, oso)
-        node.label = text.name
-        geometry = tree.nodes.new("ShaderNodeNewGeometry")
-        geometry.location = (-300, -200)
-        tree.links.new(geometry.outputs["Tangent"], node.inputs[TANGENT_INPUT])
-        node.inputs[TANGENT_INPUT].hide = True
+    node = tree.nodes.new("ShaderNodeGroup" if form == "nodes" else "ShaderNodeScript")
+    try:
+        if form == "nodes":
+            node.node_tree = group
+        else:
+            osl.load_into_script_node(node, oso)
+            node.label = text.name
+            node.inputs[TANGENT_INPUT].hide = True
+        node.width = 240
+        _write_values(node, MAPPINGS[model_id].input_values(p))
+    except BaseException:
+        tree.nodes.remove(node)
+        raise
+    _replace(mat, shader_node(mat), node)
+
+
+HELPER_TAG = "lamina_helper"  # Lamina's helper nodes (the Geometry node feeding the OSL form's tangent)
+BAKE_TAG = "lamina_bake"  # baked texture nodes (nodes.texture_wiring)
+
+
+def _norm(name: str) -> str:
+    """A socket name as both forms know it (OSL parameters are identifiers: "L1 Albedo" -> "L1_Albedo")."""
+    return "".join(c if c.isalnum() else "_" for c in name)
+
+
+def _helpers(tree, old) -> list:
+    """Lamina's Geometry helper nodes: tagged ones, and (materials made before the tag) an untagged Geometry node
+    whose only links go into the old Lamina node's tangent input."""
+    found = []
+    for n in tree.nodes:
+        if n.get(HELPER_TAG):
+            found.append(n)
+        elif n.bl_idname == "ShaderNodeNewGeometry" and old is not None:
+            links = [link for o in n.outputs for link in o.links]
+            if links and all(link.to_node == old and link.to_socket.name == TANGENT_INPUT for link in links):
+                found.append(n)
+    return found
+
+
+def _replace(mat, old, node) -> None:
+    """Swap Lamina's node ``old`` (None: a new material, or one whose Lamina node was deleted) for ``node``; every
+    other node stays. Links into ``old``'s inputs go to ``node``'s inputs of the same name (inputs that no longer
+    exist lose theirs), its output links are re-created, its location, width and frame kept. The OSL form gets a
+    Geometry helper (tagged) for its tangent; helpers and baked texture nodes (tagged) that end up feeding
+    nothing are removed, untagged nodes never."""
+    tree = mat.node_tree
+    helpers = _helpers(tree, old)
+    baked = []
+    inputs, outputs = [], []
+    if old is not None:
+        node.parent = old.parent
+        node.location = old.location
+        node.width = old.width
+        node.select = old.select
+        for socket in old.inputs:
+            for link in socket.links:
+                if link.from_node not in helpers:
+                    inputs.append((_norm(socket.name), link.from_socket, link.is_muted))
+        for socket in old.outputs:
+            for link in socket.links:
+                outputs.append((_norm(socket.name), link.to_socket, link.is_muted))
+        baked = [n for n in tree.nodes if n.get(BAKE_TAG) and any(o.is_linked for o in n.outputs)]
+        active = tree.nodes.active == old
+        tree.nodes.remove(old)
+        if active:
+            tree.nodes.active = node
     node.name = "Lamina"
-    node.width = 240
-    _write_values(node, MAPPINGS[model_id].input_values(p))
-    tree.links.new(node.outputs["BSDF"], out.inputs["Surface"])
+    by_name = {_norm(s.name): s for s in node.inputs}
+    for key, from_socket, muted in inputs:
+        if key in by_name:
+            tree.links.new(from_socket, by_name[key]).is_muted = muted
+    by_name = {_norm(s.name): s for s in node.outputs}
+    for key, to_socket, muted in outputs:
+        if key in by_name:
+            tree.links.new(by_name[key], to_socket).is_muted = muted
+    if old is None:
+        outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+        out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
+        if out is None:
+            out = tree.nodes.new("ShaderNodeOutputMaterial")
+            out.location = (node.location.x + 300, node.location.y)
+        if not out.inputs["Surface"].is_linked:
+            tree.links.new(node.outputs["BSDF"], out.inputs["Surface"])
+    if node.bl_idname == "ShaderNodeScript" and not node.inputs[TANGENT_INPUT].is_linked:
+        if helpers:  # kept where the user moved it
+            geometry = helpers.pop(0)
+        else:
+            geometry = tree.nodes.new("ShaderNodeNewGeometry")
+            geometry.parent = node.parent
+            geometry.location = (node.location.x - 300, node.location.y - 200)
+        geometry[HELPER_TAG] = True
+        tree.links.new(geometry.outputs["Tangent"], node.inputs[TANGENT_INPUT])
+    for helper in helpers:
+        if not any(o.is_linked for o in helper.outputs):
+            tree.nodes.remove(helper)
+    _prune(mat, baked)
+
+
+def _prune(mat, candidates) -> None:
+    """Remove the baked texture nodes among ``candidates`` that feed nothing any more (a Separate Color first,
+    then the texture behind it), and their images when no one else uses them."""
+    if not candidates:
+        return
+    from . import texture_wiring  # it imports this module
+
+    names = {n.name for n in candidates}
+    while True:
+        unused = [n for n in mat.node_tree.nodes if n.name in names and not any(o.is_linked for o in n.outputs)]
+        if not unused:
+            return
+        names -= {n.name for n in unused}
+        texture_wiring._remove(mat, unused, keep=set())
 
 
 def _socket_key(node, name: str) -> str:
-    return name if node.bl_idname != "ShaderNodeScript" else "".join(c if c.isalnum() else "_" for c in name)
+    return name if node.bl_idname != "ShaderNodeScript" else _norm(name)
 
 
 def _write_values(node, values: dict) -> bool:

@@ -28,7 +28,7 @@ from ..models import spongecake as model
 from . import MAPPINGS
 from . import material as lamina_material
 
-TAG = "lamina_bake"
+TAG = lamina_material.BAKE_TAG  # the rebuild (material._replace) recognises these nodes too
 LINEAR_SPACES = ("Linear Rec.709", "Working Space")  # 8-bit images in these hold linear values
 KINDS = {p.name: p.kind for p in model.LAYER}
 
