@@ -5,12 +5,17 @@ relative RMSE of the form's numpy prediction against the reference on the compar
 Cycles renders these predictions (tests/blender/test_cycles_vs_prediction.py), so the numbers are what an
 artist gets. Reference vs Monte Carlo ground truth is measured on the presets too.
 Speed: reference throughput, and Cycles render times of node group : OSL : Principled BSDF from one run.
+Multiple scattering (``MsSizes``; ``bench --no-ms`` leaves it out): the networks against Monte Carlo on the
+held-out validation set and on the paper's failure case (low-roughness fibers), a white furnace of
+non-absorbing stacks, rendered SS + MS vs Monte Carlo on presets (``addon.ms_truth``), render time with MS on
+vs off and the bake time per megapixel.
 """
 from __future__ import annotations
 
 import datetime
 import os
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -253,6 +258,377 @@ def _sheen_material(roughness: float):
     return mat
 
 
+# ------------------------------------------------------------------------------------ multiple scattering
+
+
+@dataclass(frozen=True)
+class MsSizes:
+    """How much work the multiple-scattering sections do (``bench --ms-*`` options)."""
+
+    validation: str = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                   "tests", "data", "spongecake_ms_validation")
+    failure_paths: int = 4000  # random-walk paths per wi for the low-roughness fiber configurations
+    failure_wi: int = 4  # a square number: incident directions per configuration
+    failure_wo: int = 64  # twice a square number: outgoing directions over the sphere
+    furnace_configs: int = 6  # random non-absorbing stacks per layer count
+    furnace_samples: int = 4096  # directional-albedo samples per wo (the model's own estimate)
+    furnace_paths: int = 20000  # random-walk paths per wo (ground-truth albedo)
+    presets: tuple = ("fabric", "window_shade")
+    truth: object = None  # ms_truth.TruthSettings of the rendered comparison (None: RENDER_TRUTH)
+    speed_repeats: int = 3
+    bake_size: int = 512  # texels per side of the synthetic texture for bake timing
+    seed: int = 7
+
+
+MS_DEFAULT = MsSizes()
+# Rendered comparison: 4000 paths per light direction at every 3rd pixel (sphere ~190 pixels at 48 px).
+RENDER_TRUTH = dict(paths=4000, albedo_paths=4000, stride=3)
+# The paper's failure case (Sec. 5.3): low-roughness fibers in the tangent plane.
+FAILURE_CASES = tuple(
+    [(f"fiber α={a} Tρ={t}", [{"type": "fiber", "roughness": a, "thickness": t, "albedo": [0.9] * 3,
+                                "orientation": [1, 0, 0]}]) for a in (0.05, 0.1) for t in (1.0, 3.0)]
+    + [("fiber α=0.05 Tρ=1 over fiber α=0.1 Tρ=3",
+        [{"type": "fiber", "roughness": 0.05, "thickness": 1.0, "albedo": [0.9] * 3, "orientation": [1, 0, 0]},
+         {"type": "fiber", "roughness": 0.1, "thickness": 3.0, "albedo": [0.9] * 3, "orientation": [1, 0, 0]}])])
+FURNACE_THETAS = (0.0, 45.0, 75.0, 85.0)  # view angles of the white furnace (degrees; 85 = grazing)
+
+
+def _manifest(n_layers: int) -> dict:
+    from .bake import spongecake as ms
+
+    try:
+        return ms.network(n_layers).manifest
+    except FileNotFoundError:
+        return {}
+
+
+def weights_note() -> str:
+    """One sentence on the shipped networks from their manifests (flags placeholder weights)."""
+    parts = []
+    for n in (1, 2):
+        m = _manifest(n)
+        if not m:
+            parts.append(f"{n}-layer network missing")
+            continue
+        placeholder = " — placeholder weights from a tiny run" if m.get("training_configs", 0) < 100 else ""
+        parts.append(f"{n}-layer network trained on {m.get('training_configs', '?')} configurations × "
+                     f"{m.get('pairs_per_config', '?')} direction pairs ({m.get('date', '?')}, "
+                     f"{m.get('code_version', '?')}){placeholder}")
+    return "; ".join(parts) + "."
+
+
+def validation_errors(folder: str) -> dict:
+    """{layers: lobe_errors} of the shipped networks on the held-out Monte Carlo set (absent: not there)."""
+    from .bake import validation
+
+    out = {}
+    for n in (1, 2):
+        try:
+            data = validation.load_shards(folder, n)
+        except FileNotFoundError:
+            continue
+        scores = validation.lobe_errors(data)
+        meta = data["meta"][0]
+        scores.update(paths=meta.get("paths"), n_wi=meta.get("n_wi"), n_wo=meta.get("n_wo"))
+        out[n] = scores
+    return out
+
+
+def _stratified_hemisphere(rng, n: int) -> np.ndarray:
+    side = int(round(np.sqrt(n)))
+    i, j = np.divmod(np.arange(side * side), side)
+    cos_t = np.maximum(1.0 - (i + rng.random(side * side)) / side, 1e-3)
+    phi = 2.0 * np.pi * (j + rng.random(side * side)) / side
+    s = np.sqrt(1.0 - cos_t**2)
+    return np.stack([s * np.cos(phi), s * np.sin(phi), cos_t], axis=1)
+
+
+def lobe_data(p, n_wi: int, n_wo: int, paths: int, seed: int) -> dict:
+    """One configuration in the validation set's format: the walk's orders >= 2 on stratified directions,
+    from two independent halves of ``paths`` (``ms_half_diff`` = half their difference)."""
+    from .bake import layer_rows
+
+    rng = np.random.default_rng(seed)
+    wi = _stratified_hemisphere(rng, n_wi)
+    wo = np.concatenate([_stratified_hemisphere(rng, n_wo // 2),
+                         _stratified_hemisphere(rng, n_wo // 2) * np.array([1.0, 1.0, -1.0])])
+    big_wi, big_wo = np.repeat(wi, len(wo), axis=0), np.tile(wo, (len(wi), 1))
+    halves = [reference.ground_truth(p, big_wi, big_wo, n_paths=paths // 2, seed=seed + h, max_depth=64)[1]
+              for h in (0, 1)]
+    shape = (1, len(wi), len(wo), 3)
+    return {"rows": layer_rows.stack_rows(p)[None], "wi": wi[None], "wo": wo[None],
+            "ms": (0.5 * (halves[0] + halves[1])).reshape(shape),
+            "ms_half_diff": (0.5 * (halves[0] - halves[1])).reshape(shape)}
+
+
+def failure_case_errors(sizes: MsSizes) -> list[dict]:
+    """The network's lobe error on low-roughness in-plane fibers against a fresh random walk."""
+    from .bake import validation
+
+    rows = []
+    for i, (label, layers) in enumerate(FAILURE_CASES):
+        p = model.params_from_dict({"layers": layers, "multiple_scattering": True})
+        data = lobe_data(p, sizes.failure_wi, sizes.failure_wo, sizes.failure_paths, sizes.seed + 101 * i)
+        scores = validation.lobe_errors(data)
+        rows.append({"label": label, "layers": len(layers), **{k: v for k, v in scores.items() if k != "per_config"}})
+    return rows
+
+
+def _white_layer(rng) -> dict:
+    kind = rng.choice(model.LAYER_TYPES, p=(0.4, 0.4, 0.2))
+    if kind == "hg":
+        rough, orient = float(rng.uniform(-0.8, 0.8)), [0.0, 0.0, 1.0]
+    else:
+        rough = float(np.exp(rng.uniform(np.log(0.05), np.log(1.0))))
+        u, ct, phi = rng.random(), rng.random(), 2.0 * np.pi * rng.random()
+        st = np.sqrt(1.0 - ct * ct)
+        tilted = [st * np.cos(phi), st * np.sin(phi), ct]
+        in_plane = [np.cos(phi), np.sin(phi), 0.0]
+        if kind == "surface":
+            orient = [0.0, 0.0, 1.0] if u < 0.5 else tilted
+        else:
+            orient = in_plane if u < 0.4 else ([0.0, 0.0, 1.0] if u < 0.6 else tilted)
+    return {"type": str(kind), "roughness": rough, "albedo": [1.0, 1.0, 1.0], "f0": [1.0, 1.0, 1.0],
+            "thickness": float(np.exp(rng.uniform(np.log(0.1), np.log(10.0)))),
+            "orientation": [float(x) for x in orient]}
+
+
+def white_furnace_configs(n_configs: int, seed: int) -> list[dict]:
+    """Seeded random non-absorbing stacks (albedo 1, f0 1, no substrate, no delta): ``n_configs`` of each
+    layer count."""
+    rng = np.random.default_rng(seed)
+    return [{"layers": [_white_layer(rng) for _ in range(n)]} for n in (1, 2) for _ in range(n_configs)]
+
+
+def _furnace_directions() -> np.ndarray:
+    t = np.radians(np.asarray(FURNACE_THETAS))
+    phi = np.radians(30.0)
+    return np.stack([np.sin(t) * np.cos(phi), np.sin(t) * np.sin(phi), np.cos(t)], axis=1)
+
+
+def white_furnace(sizes: MsSizes) -> list[dict]:
+    """Per configuration and view direction: the energy a white furnace returns, counting the unscattered light
+    (the Dirac part, so a non-absorbing stack must give exactly 1): SS + MS from the model, SS alone, and the
+    random walk's total (its own shortfall from 1 is truncation at 64 orders plus noise)."""
+    wo = _furnace_directions()
+    out = []
+    for i, config in enumerate(white_furnace_configs(sizes.furnace_configs, sizes.seed)):
+        p = model.params_from_dict({**config, "multiple_scattering": True})
+        p_ss = model.params_from_dict(config)
+        through = reference.delta_transmittance(model.params_from_dict({**config, "delta_transmission": True}), wo)
+        twice = [reference.directional_albedo(p, wo, n=sizes.furnace_samples // 2, seed=i + 10_000 * h)
+                 for h in (0, 1)]  # two halves: their difference is the estimate's own noise
+        a_ms = 0.5 * (twice[0] + twice[1]) + through
+        a_ss = reference.directional_albedo(p_ss, wo, n=sizes.furnace_samples, seed=i) + through
+        truth = sum(reference.ground_truth_albedo(p_ss, wo, n_paths=sizes.furnace_paths, seed=1000 + i))
+        for k, theta in enumerate(FURNACE_THETAS):
+            out.append({"config": i, "layers": len(config["layers"]), "theta": theta,
+                        "ss_ms": float(a_ms[k].mean()), "ss": float(a_ss[k].mean()),
+                        "truth": float(truth[k].mean()),
+                        "ss_ms_noise": float(0.5 * np.abs(twice[0][k] - twice[1][k]).mean())})
+    return out
+
+
+def furnace_summary(rows: list[dict]) -> dict:
+    """Mean and worst |1 - a| and |a - truth| for SS + MS and SS only, and the walk's |1 - truth|."""
+    a = {k: np.array([r[k] for r in rows]) for k in ("ss_ms", "ss", "truth")}
+    out = {}
+    for name in ("ss_ms", "ss"):
+        e1, et = np.abs(1.0 - a[name]), np.abs(a[name] - a["truth"])
+        out[name] = {"mean_vs_1": float(e1.mean()), "worst_vs_1": float(e1.max()),
+                     "mean_vs_truth": float(et.mean()), "worst_vs_truth": float(et.max())}
+    e = np.abs(1.0 - a["truth"])
+    out["truth"] = {"mean_vs_1": float(e.mean()), "worst_vs_1": float(e.max())}
+    out["ss_ms"]["noise"] = float(np.sqrt(np.mean([r.get("ss_ms_noise", 0.0) ** 2 for r in rows])))
+    return out
+
+
+FURNACE_GOAL = (0.05, 0.15)  # mean and worst |1 - a| of SS + MS (issue 3)
+
+
+def rendered_ms_errors(name: str, sizes: MsSizes, samples: int, resolution: int) -> dict:
+    """{scene: ms entry per form} of ``compare_material`` with multiple scattering, on the accuracy scenes."""
+    import tempfile
+
+    from .ms_truth import TruthSettings
+    from .nodes import material as lamina_material
+    from .operators import blend_io, compare_run
+
+    truth = sizes.truth or TruthSettings(**RENDER_TRUTH, seed=sizes.seed)
+    p = model.params_from_dict({**presets.load(MODEL, name), "multiple_scattering": True})
+    specs = _scenes(resolution)
+    cache, out = {}, {}
+    with tempfile.TemporaryDirectory(prefix="lamina_bench_ms_") as tmp:
+        for form in ("nodes", "osl"):
+            before = blend_io.snapshot()
+            try:
+                mat = lamina_material.new_material(MODEL, p, form)
+                report = compare_run.compare_material(mat, specs, samples, resolution, 0, os.path.join(tmp, form),
+                                                      reference_cache=cache, ms=truth)
+            finally:
+                blend_io.remove_new_data(before)
+            for scene, entry in report.items():
+                out.setdefault(scene, {})[form] = entry["ms"]
+    return out
+
+
+def bake_throughput(size: int) -> tuple[str, float]:
+    """(what was timed, seconds per megapixel): ``bake.textures.bake_maps`` on a synthetic size × size input
+    (2-layer fabric, textures on the top layer's albedo and roughness and the bottom layer's thickness) when
+    that module exists, else the core inference ``predict_rows`` on size² texels."""
+    from .bake import layer_rows
+    from .bake import spongecake as ms
+
+    p = model.params_from_dict({**presets.load(MODEL, "fabric"), "multiple_scattering": True})
+    rng = np.random.default_rng(0)
+    ms.network(len(p.layers))  # load once, outside the timing
+    try:
+        from .bake import textures
+    except ImportError:
+        textures = None
+    if textures is not None:
+        inputs = {(0, "albedo"): rng.uniform(0.2, 0.9, (size, size, 3)),
+                  (0, "roughness"): rng.uniform(0.05, 0.5, (size, size)),
+                  (1, "thickness"): rng.uniform(1.0, 8.0, (size, size))}
+        seconds = min(_timed(lambda: textures.bake_maps(p, inputs)) for _ in range(2))
+        what = (f"`bake.textures.bake_maps`, 2-layer fabric, synthetic {size}×{size} textures on three inputs, "
+                "network inference and packing into RGBA maps, no file I/O")
+    else:
+        rows = np.repeat(layer_rows.stack_rows(p)[None], size * size, axis=0)
+        rows[:, :, layer_rows.ROUGHNESS] *= rng.uniform(0.5, 1.0, (size * size, 1))  # texels differ
+        seconds = min(_timed(lambda: ms.predict_rows(rows)) for _ in range(2))
+        what = (f"core inference `bake.spongecake.predict_rows` (network + decode), 2-layer fabric, {size}×{size} "
+                "texels (`bake.textures` not available)")
+    return what, seconds / (size * size / 1e6)
+
+
+def ms_render_times(names, samples: int, resolution: int, repeats: int) -> list[dict]:
+    """Cycles render time of each preset with and without multiple scattering, both forms, on the sphere scene;
+    the renders alternate (SS, SS + MS, ...) and the fastest of ``repeats`` counts."""
+    import bpy
+
+    from .nodes import material as lamina_material
+    from .operators import blend_io
+    from .operators.cycles_render import render_cycles
+
+    spec = ref_scenes.sphere_scene(resolution=resolution)
+    path = os.path.join(bpy.app.tempdir, "bench_ms.exr")
+    rows = []
+    for name in names:
+        data = presets.load(MODEL, name)
+        before = blend_io.snapshot()
+        try:
+            mats = {(form, ms): lamina_material.new_material(
+                        MODEL, model.params_from_dict({**data, "multiple_scattering": ms}), form)
+                    for form in ("nodes", "osl") for ms in (False, True)}
+            times = {k: [] for k in mats}
+            for _ in range(repeats):
+                for k, mat in mats.items():
+                    times[k].append(render_cycles(mat, spec, samples, 0, path)[1])
+        finally:
+            blend_io.remove_new_data(before)
+        rows.append({"preset": name, **{f"{form}{'_ms' if ms else ''}": min(t) for (form, ms), t in times.items()}})
+    return rows
+
+
+def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
+    lines = ["", "## Multiple scattering", "",
+             "The network's lobes (Sec. 5) against the reference's independent random walk (orders ≥ 2). "
+             + weights_note(), ""]
+    # --- held-out validation set
+    val = validation_errors(sizes.validation)
+    lines += ["### Network vs Monte Carlo, held-out validation set", "",
+              "`addon.bake.validation.lobe_errors` on `tests/data/spongecake_ms_validation` (independent seed, "
+              "never trained on): relative L1 error of f_ms |cos θo| summed over each configuration's direction "
+              "pairs, its relative energy error, and the Monte Carlo noise of the data (relative L1 of the standard "
+              "error) for scale.", ""]
+    if val:
+        lines += ["| layers | configs | pairs × paths | mean | median | worst | mean energy error | Monte Carlo noise |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for n, v in val.items():
+            lines.append(f"| {n} | {v['configs']} | {v['n_wi']}×{v['n_wo']} × {v['paths']} | "
+                         f"{_pct(v['mean_relative_lobe_error'])} | {_pct(v['median_relative_lobe_error'])} | "
+                         f"{_pct(v['worst_relative_lobe_error'])} | {_pct(v['mean_relative_energy_error'])} | "
+                         f"{_pct(v['mean_monte_carlo_noise'])} |")
+    else:
+        lines.append("Not measured: the validation set is missing (`make validation-set`).")
+    # --- failure case
+    fail = failure_case_errors(sizes)
+    lines += ["", "### The paper's failure case: low-roughness fibers", "",
+              "Fibers in the tangent plane with α ≤ 0.1 (albedo 0.9) have sharp multiply-scattered highlights that "
+              "the network's single extra lobe cannot follow (the paper's Sec. 5 limitation). Same error measure "
+              f"against a fresh random walk ({sizes.failure_wi} × {sizes.failure_wo} direction pairs, "
+              f"{sizes.failure_paths} paths per wi).", "",
+              "| configuration | lobe error | energy error | Monte Carlo noise |", "|---|---|---|---|"]
+    for r in fail:
+        lines.append(f"| {r['label']} | {_pct(r['mean_relative_lobe_error'])} | "
+                     f"{_pct(r['mean_relative_energy_error'])} | {_pct(r['mean_monte_carlo_noise'])} |")
+    # --- white furnace
+    rows = white_furnace(sizes)
+    summ = {"all": furnace_summary(rows)}
+    for n in (1, 2):
+        summ[f"{n} layer{'s' if n > 1 else ''}"] = furnace_summary([r for r in rows if r["layers"] == n])
+    goal_mean, goal_worst = FURNACE_GOAL
+    met = summ["all"]["ss_ms"]["mean_vs_1"] <= goal_mean and summ["all"]["ss_ms"]["worst_vs_1"] <= goal_worst
+    lines += ["", "### White furnace: energy conservation of non-absorbing stacks", "",
+              f"{sizes.furnace_configs} random 1-layer and {sizes.furnace_configs} random 2-layer stacks (seed "
+              f"{sizes.seed}; albedo 1, f0 1, no substrate; flake α in [0.05, 1], hg g in [-0.8, 0.8], Tρ in "
+              f"[0.1, 10]), each seen from θo = {', '.join(f'{t:g}°' for t in FURNACE_THETAS)}. The energy returned "
+              "counts the unscattered light (the Dirac part), so the exact answer is 1. SS + MS: the model's "
+              f"directional albedo with the network ({sizes.furnace_samples} samples per direction; its own noise, "
+              f"from two halves: {_pct(summ['all']['ss_ms']['noise'])} RMS) plus the unscattered light; "
+              f"Monte Carlo: the random walk's total ({sizes.furnace_paths} paths; short of 1 only by truncation "
+              "at 64 orders, since every path keeps weight 1). Goal for SS + MS: mean |1 − a| ≤ 5%, worst ≤ 15%.",
+              "",
+              "| stacks | SS + MS mean \\|1 − a\\| | worst | SS + MS vs Monte Carlo mean | worst | SS only mean "
+              "\\|1 − a\\| | worst | Monte Carlo mean \\|1 − a\\| |",
+              "|---|---|---|---|---|---|---|---|"]
+    for label, sm in summ.items():
+        lines.append(f"| {label} | {_pct(sm['ss_ms']['mean_vs_1'])} | {_pct(sm['ss_ms']['worst_vs_1'])} | "
+                     f"{_pct(sm['ss_ms']['mean_vs_truth'])} | {_pct(sm['ss_ms']['worst_vs_truth'])} | "
+                     f"{_pct(sm['ss']['mean_vs_1'])} | {_pct(sm['ss']['worst_vs_1'])} | "
+                     f"{_pct(sm['truth']['mean_vs_1'])} |")
+    lines += ["", f"Goal {'met' if met else '**not met**'} (mean {_pct(summ['all']['ss_ms']['mean_vs_1'])}, worst "
+              f"{_pct(summ['all']['ss_ms']['worst_vs_1'])})."]
+    # --- rendered
+    from .ms_truth import TruthSettings
+
+    truth = sizes.truth or TruthSettings(**RENDER_TRUTH, seed=sizes.seed)
+    lines += ["", "### Rendered: SS + MS vs Monte Carlo on the presets", "",
+              f"Relative RMSE against the Monte Carlo ground truth (closed-form single scattering + the walk's orders "
+              f"≥ 2) on the comparison scenes at {resolution} px, over the pixels where the walk ran (one "
+              f"in {truth.stride}×{truth.stride}; {truth.paths} paths per light direction, furnace "
+              f"{truth.albedo_paths} per pixel); its noise, in the same units, is the floor of every error in the "
+              f"row. Network: the reference with the network's lobes; node group / OSL: Cycles, {samples} samples, "
+              "with multiple scattering on (their errors include the mapping's approximations and Cycles' noise). "
+              "The last two columns measure Cycles against the network reference instead.", "",
+              "| preset | scene | MS share | SS only | network | node group | OSL | Monte Carlo noise | node group vs "
+              "network | OSL vs network |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for name in sizes.presets:
+        for scene, forms in rendered_ms_errors(name, sizes, samples, resolution).items():
+            n, o = forms["nodes"], forms["osl"]
+            lines.append(f"| {name} | {scene} | {_pct(n['ms_share'])} | {_pct(n['single_vs_truth'])} | "
+                         f"{_pct(n['network_vs_truth'])} | {_pct(n['cycles_vs_truth'])} | {_pct(o['cycles_vs_truth'])} | "
+                         f"{_pct(n['truth_noise'])} | {_pct(n['cycles_vs_network'])} | {_pct(o['cycles_vs_network'])} |")
+    return "\n".join(lines) + "\n"
+
+
+def ms_speed_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
+    rows = ms_render_times(sizes.presets, samples, resolution, sizes.speed_repeats)
+    what, per_mp = bake_throughput(sizes.bake_size)
+    lines = ["", "## Multiple scattering", "",
+             f"Cycles CPU render of the sphere scene, {resolution}×{resolution} px, {samples} samples, the same "
+             f"material with multiple scattering off and on, renders alternating, fastest of {sizes.speed_repeats}. "
+             "Goal: SS + MS ≤ 1.5× SS (the paper reports 1.44×).", "",
+             "| preset | node group SS s | SS + MS s | ratio | OSL SS s | SS + MS s | ratio |",
+             "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['preset']} | {r['nodes']:.2f} | {r['nodes_ms']:.2f} | {r['nodes_ms'] / r['nodes']:.2f} | "
+                     f"{r['osl']:.2f} | {r['osl_ms']:.2f} | {r['osl_ms'] / r['osl']:.2f} |")
+    lines += ["", f"Baking multiple scattering into textures: **{per_mp:.2f} s per megapixel** ({what}; fastest of 2)."]
+    return "\n".join(lines) + "\n"
+
+
 def overview_picture(path: str, samples: int, resolution: int) -> None:
     """docs/images/overview.png: every preset's sphere, OSL form | reference | error, top to bottom."""
     import tempfile
@@ -265,13 +641,19 @@ def overview_picture(path: str, samples: int, resolution: int) -> None:
         write_png(path, read_png(os.path.join(tmp, "overview.png")))
 
 
-def run(out_dir: str, samples: int = 64, resolution: int = 64) -> None:
+def run(out_dir: str, samples: int = 64, resolution: int = 64, ms: MsSizes | None = MS_DEFAULT) -> None:
+    """Both documents; ``ms`` sizes the multiple-scattering sections (None: leave them out)."""
     from .operators.compare_run import write_text_atomic
 
     os.makedirs(out_dir, exist_ok=True)
     overview_picture(os.path.join(out_dir, "images", "overview.png"), samples * 2, resolution * 2)
-    write_text_atomic(os.path.join(out_dir, "accuracy.md"),
-                      accuracy_markdown(resolution) + sheen_alternative(samples * 2, resolution))
+    accuracy = accuracy_markdown(resolution) + sheen_alternative(samples * 2, resolution)
+    if ms is not None:
+        accuracy += ms_accuracy_markdown(ms, samples, resolution)
+    write_text_atomic(os.path.join(out_dir, "accuracy.md"), accuracy)
     print(f"lamina: wrote {os.path.join(out_dir, 'accuracy.md')}", flush=True)
-    write_text_atomic(os.path.join(out_dir, "benchmarks.md"), benchmarks_markdown(samples * 2, resolution * 4))
+    speed = benchmarks_markdown(samples * 2, resolution * 4)
+    if ms is not None:
+        speed += ms_speed_markdown(ms, samples * 2, resolution * 4)
+    write_text_atomic(os.path.join(out_dir, "benchmarks.md"), speed)
     print(f"lamina: wrote {os.path.join(out_dir, 'benchmarks.md')}", flush=True)

@@ -39,6 +39,13 @@ def build_parser() -> argparse.ArgumentParser:
     _material_args(cp)
     _compare_args(cp)
     cp.add_argument("--out", required=True, help="output folder (created)")
+    cp.add_argument("--ms", action="store_true",
+                    help="multiple scattering: compare SS only, SS + MS (network) and SS + MS (Monte Carlo)")
+    cp.add_argument("--ms-paths", type=int, default=2000,
+                    help="with --ms: random-walk paths per light direction (each sphere pixel has its own)")
+    cp.add_argument("--ms-albedo-paths", type=int, default=4000, help="with --ms: furnace paths per pixel")
+    cp.add_argument("--ms-stride", type=int, default=2,
+                    help="with --ms: Monte Carlo at every n-th row and column (errors use those pixels)")
 
     dm = sub.add_parser("demo", help="compare every preset and write index.html")
     _compare_args(dm)
@@ -48,6 +55,14 @@ def build_parser() -> argparse.ArgumentParser:
     bn.add_argument("--out", default="docs")
     bn.add_argument("--samples", type=int, default=64)
     bn.add_argument("--resolution", type=int, default=64)
+    bn.add_argument("--no-ms", action="store_true", help="leave out the multiple-scattering sections")
+    bn.add_argument("--ms-paths", type=int, default=4000,
+                    help="Monte Carlo paths per light direction of the rendered multiple-scattering comparison")
+    bn.add_argument("--ms-stride", type=int, default=3, help="its Monte Carlo runs at every n-th row and column")
+    bn.add_argument("--ms-furnace-configs", type=int, default=6, help="random white-furnace stacks per layer count")
+    bn.add_argument("--ms-failure-paths", type=int, default=4000, help="paths per wi for the low-roughness fibers")
+    bn.add_argument("--ms-repeats", type=int, default=3, help="renders per timing (the fastest counts)")
+    bn.add_argument("--ms-bake-size", type=int, default=512, help="texture side for the bake timing")
     bk = sub.add_parser("bake", help="bake a Lamina material's multiple scattering (per texel where Image Textures "
                                      "drive its layers) and save the .blend")
     bk.add_argument("--blend", required=True, help="the .blend to open")
@@ -135,12 +150,30 @@ def cmd_make_material(args) -> int:
 def cmd_compare(args) -> int:
     p = load_params(args)
     forms, scenes = _check_compare_args(args)
+    ms = _ms_settings(args, p) if args.ms else None
     from .operators import compare_run
 
     report = compare_run.compare_params(args.model, p, forms, scenes, args.samples, args.resolution, args.seed,
-                                        os.path.abspath(args.out), label=args.preset or "custom")
+                                        os.path.abspath(args.out), label=args.preset or "custom", ms=ms)
     print(compare_run.summary_lines(report))
     return 0
+
+
+def _ms_settings(args, p):
+    """The Monte Carlo settings of ``compare --ms``; refuses stacks the networks do not cover."""
+    from .ms_truth import TruthSettings
+
+    least = 2 * TruthSettings.batches  # at least 2 paths per batch
+    if min(args.ms_paths, args.ms_albedo_paths) < least or args.ms_stride < 1:
+        raise CliError(f"--ms-paths and --ms-albedo-paths must be ≥ {least} and --ms-stride ≥ 1")
+    if not hasattr(MODELS[args.model], "MS_MAX_LAYERS"):
+        raise CliError(f"--ms: model {args.model} has no multiple scattering")
+    try:
+        MODELS[args.model].validate({**p.to_dict(), "multiple_scattering": True})
+    except ParamError as e:
+        raise CliError(f"--ms: {e}") from None
+    return TruthSettings(paths=args.ms_paths, albedo_paths=args.ms_albedo_paths, stride=args.ms_stride,
+                         seed=args.seed)
 
 
 def cmd_demo(args) -> int:
@@ -155,8 +188,21 @@ def cmd_demo(args) -> int:
 def cmd_bench(args) -> int:
     from . import bench
 
-    bench.run(os.path.abspath(args.out), samples=args.samples, resolution=args.resolution)
+    ms = None
+    if not args.no_ms:
+        from .ms_truth import TruthSettings
+
+        least = 2 * TruthSettings.batches  # at least 2 paths per batch
+        if min(args.ms_paths, args.ms_failure_paths) < least or min(
+                args.ms_stride, args.ms_furnace_configs, args.ms_repeats, args.ms_bake_size) < 1:
+            raise CliError(f"--ms-paths and --ms-failure-paths must be ≥ {least}, the other --ms-* options ≥ 1")
+        ms = bench.MsSizes(truth=TruthSettings(paths=args.ms_paths, albedo_paths=args.ms_paths, stride=args.ms_stride,
+                                               seed=bench.MS_DEFAULT.seed),
+                           furnace_configs=args.ms_furnace_configs, failure_paths=args.ms_failure_paths,
+                           speed_repeats=args.ms_repeats, bake_size=args.ms_bake_size)
+    bench.run(os.path.abspath(args.out), samples=args.samples, resolution=args.resolution, ms=ms)
     return 0
+
 
 
 def cmd_bake(args) -> int:

@@ -16,6 +16,16 @@ class LaminaCompareSettings(bpy.types.PropertyGroup):
     samples: bpy.props.IntProperty(name="Samples", default=64, min=1, max=4096)
     resolution: bpy.props.IntProperty(name="Resolution", default=96, min=16, max=1024)
     scene: bpy.props.EnumProperty(name="Scene", items=SCENE_ITEMS, default="sphere")
+    multiple_scattering: bpy.props.BoolProperty(
+        name="Multiple scattering", default=False,
+        description="Also compare single scattering alone and SS + MS (network) with a Monte Carlo ground truth "
+                    "of SS + MS (slower: a random walk per pixel)")
+    ms_paths: bpy.props.IntProperty(
+        name="Monte Carlo paths", default=1000, min=2, max=1_000_000,
+        description="Random-walk paths per light direction of the multiple-scattering ground truth")
+    ms_stride: bpy.props.IntProperty(
+        name="Monte Carlo stride", default=2, min=1, max=16,
+        description="The ground truth runs at every n-th row and column; errors use those pixels")
     last_report: bpy.props.StringProperty(name="Last report", default="")
 
 
@@ -36,11 +46,29 @@ class LAMINA_OT_compare(bpy.types.Operator):
         self._mat = context.material
         self._scenes = list(compare_run.SCENES) if settings.scene == "ALL" else [settings.scene]
         self._done = []
+        self._cache = {}
         # Blender's session temp folder: removed when Blender exits; the picture shown is packed into the file
         self._out = tempfile.mkdtemp(prefix="lamina_compare_", dir=bpy.app.tempdir or None)
         context.window_manager.progress_begin(0, len(self._scenes))
 
+    def _refusal(self, context) -> str | None:
+        """Why the comparison cannot run with these settings (None: it can)."""
+        if not context.window_manager.lamina_compare.multiple_scattering:
+            return None
+        from ..models.params import ParamError
+
+        model_id, p = lamina_material.current_params(context.material)
+        try:
+            compare_run.with_multiple_scattering(model_id, p)
+        except (ParamError, KeyError) as e:
+            return f"Multiple scattering: {e}"
+        return None
+
     def invoke(self, context, event):
+        refusal = self._refusal(context)
+        if refusal:
+            self.report({"ERROR"}, refusal)
+            return {"CANCELLED"}
         self._start(context)
         wm = context.window_manager
         self._timer = wm.event_timer_add(0.05, window=context.window)
@@ -48,6 +76,10 @@ class LAMINA_OT_compare(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def execute(self, context):  # scripted and headless use: every step at once
+        refusal = self._refusal(context)
+        if refusal:
+            self.report({"ERROR"}, refusal)
+            return {"CANCELLED"}
         self._start(context)
         while self._step(context):
             pass
@@ -72,8 +104,13 @@ class LAMINA_OT_compare(bpy.types.Operator):
         if context.workspace is not None:
             context.workspace.status_text_set(f"Lamina: comparing {self._mat.name} ({scene})…")
         settings = context.window_manager.lamina_compare
+        ms = None
+        if settings.multiple_scattering:
+            from ..ms_truth import TruthSettings
+
+            ms = TruthSettings(paths=settings.ms_paths, albedo_paths=2 * settings.ms_paths, stride=settings.ms_stride)
         self._done.append(compare_run.compare_material(self._mat, [scene], settings.samples, settings.resolution,
-                                                       0, self._out))
+                                                       0, self._out, reference_cache=self._cache, ms=ms))
         context.window_manager.progress_update(len(self._done))
         return True
 
