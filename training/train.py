@@ -40,7 +40,7 @@ VALIDATION_SET = Path(__file__).resolve().parents[1] / "tests" / "data" / "spong
 
 
 class TorchOps:
-    exp, tanh, sqrt, log, sigmoid = torch.exp, torch.tanh, torch.sqrt, torch.log, torch.sigmoid
+    exp, tanh, sqrt, log, sigmoid, clip = torch.exp, torch.tanh, torch.sqrt, torch.log, torch.sigmoid, torch.clamp
     softplus = staticmethod(torch.nn.functional.softplus)
 
     @staticmethod
@@ -104,31 +104,57 @@ def predicted_lobe(net, rows: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor) 
     return ((f + lambert) * big_wo[..., 2:].abs()).reshape(b, n_wi, n_wo, 3)
 
 
-def lobe_loss(net, data: dict, index) -> torch.Tensor:
+def lobe_loss(net, data: dict, index, rng=None) -> torch.Tensor:
     """MAE of f |cos wo| per configuration, relative to that configuration's mean multiple scattering plus
-    ENERGY_FLOOR: the error that matters is relative to each lobe, and the floor keeps configurations whose
-    multiple scattering is negligible (and mostly Monte Carlo noise) from dominating."""
-    truth = target(data, index)
-    error = (predicted_lobe(net, *tensors(data, index)) - truth).abs().mean(dim=(1, 2, 3))
+    ENERGY_FLOOR: the error that matters is relative to each lobe, and the floor keeps
+    configurations whose multiple scattering is negligible (and mostly Monte Carlo noise) from dominating.
+    With ``rng``, the batch is augmented by the model's exact symmetries (``augment``)."""
+    batch = {k: data[k][index] for k in ("rows", "wi", "wo", "ms")}
+    if rng is not None:
+        batch = augment(batch, rng)
+    truth = target(batch)
+    error = (predicted_lobe(net, *tensors(batch)) - truth).abs().mean(dim=(1, 2, 3))
     return (error / (truth.mean(dim=(1, 2, 3)) + ENERGY_FLOOR)).mean()
 
 
-def target(data: dict, index) -> torch.Tensor:
-    return torch.as_tensor(data["ms"][index] * np.abs(data["wo"][index][:, None, :, 2:]), dtype=torch.float64)
+def augment(batch: dict, rng: np.random.Generator) -> dict:
+    """Exact symmetries of SpongeCake: the RGB channels are independent random-walk experiments over the same
+    paths (permute albedo, f0 and the lobe together), and rotating or mirroring every orientation and direction
+    about the normal changes nothing."""
+    rows = batch["rows"].copy()
+    n = len(rows)
+    perm = rng.permuted(np.tile(np.arange(3), (n, 1)), axis=1)
+    for channels in (layer_rows.ALBEDO, layer_rows.F0):
+        rows[:, :, channels] = np.take_along_axis(rows[:, :, channels], perm[:, None, :], axis=2)
+    angle = rng.uniform(0.0, 2.0 * np.pi, n)
+    c, s = np.cos(angle), np.sin(angle)
+    mirror = np.where(rng.random(n) < 0.5, -1.0, 1.0)
+    turn = np.zeros((n, 3, 3))
+    turn[:, 0, 0], turn[:, 0, 1], turn[:, 1, 0], turn[:, 1, 1], turn[:, 2, 2] = c, -s * mirror, s, c * mirror, 1.0
+
+    def rotate(v):
+        return np.einsum("nij,n...j->n...i", turn, v)
+
+    rows[:, :, layer_rows.ORIENTATION] = rotate(rows[:, :, layer_rows.ORIENTATION])
+    return {"rows": rows, "wi": rotate(batch["wi"]), "wo": rotate(batch["wo"]),
+            "ms": np.take_along_axis(batch["ms"], perm[:, None, None, :], axis=3)}
 
 
-def tensors(data: dict, index):
-    return (torch.as_tensor(data["rows"][index]), torch.as_tensor(data["wi"][index], dtype=torch.float64),
-            torch.as_tensor(data["wo"][index], dtype=torch.float64))
+def target(batch: dict) -> torch.Tensor:
+    return torch.as_tensor(batch["ms"] * np.abs(batch["wo"][:, None, :, 2:]), dtype=torch.float64)
+
+
+def tensors(batch: dict):
+    return (torch.as_tensor(batch["rows"], dtype=torch.float64), torch.as_tensor(batch["wi"], dtype=torch.float64),
+            torch.as_tensor(batch["wo"], dtype=torch.float64))
 
 
 # ------------------------------------------------------------------------------------------ evaluation
 
 def lobe_errors(net, data: dict) -> dict:
     """``addon.bake.validation.lobe_errors`` for the network being trained (torch forward pass)."""
-    index = np.arange(len(data["rows"]))
     with torch.no_grad():
-        predicted = predicted_lobe(net, *tensors(data, index)).numpy()
+        predicted = predicted_lobe(net, *tensors(data)).numpy()
     return validation.lobe_errors(data, predicted)
 
 
@@ -154,7 +180,7 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
             frac = min(1.0, (time.time() - start) / budget)
             for group in opt.param_groups:
                 group["lr"] = LEARNING_RATE * 0.5 * (1.0 + math.cos(math.pi * frac)) + 1e-5
-            loss = lobe_loss(net, data, shuffled[i:i + batch])
+            loss = lobe_loss(net, data, shuffled[i:i + batch], rng)
             opt.zero_grad()
             loss.backward()
             opt.step()

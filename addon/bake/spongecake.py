@@ -13,9 +13,10 @@ W1 is folded into the lobe's albedo (f_ss is linear in it), so a prediction is a
 Encoding (per layer, ``FEATURES`` = 14 inputs): type one-hot (3); roughness as log alpha mapped from
 [0.01, 1] to [-1, 1] for flakes, g / 0.95 for hg; 2 albedo - 1 (3); log T rho mapped from [0.01, 10] to [-1, 1];
 2 f0 - 1 (3); orientation with z >= 0 (3; zero for hg). Inputs beyond the training ranges are clamped.
-Decoding (per layer, ``OUTPUTS`` = 11 raw values, then ``WEIGHT_OUTPUTS`` = 7 for W1, W2r RGB, W2t RGB): alpha' log-sigmoid in [0.01, 1]
-(g' = 0.95 tanh for hg), albedo' sigmoid, T rho' log-sigmoid in [0.01, 20], f0' sigmoid (1 for layers without
-Fresnel), orientation' = normalize(orientation + tanh(.)), W = softplus(.). ``decode`` is written against an
+Decoding (per layer, ``OUTPUTS`` = 11 raw values, then ``WEIGHT_OUTPUTS`` = 7 for W1, W2r RGB, W2t RGB): each
+lobe parameter is a residual on the layer's own (``decode``): alpha' in [0.01, 1], g' in (-0.95, 0.95),
+albedo' and f0' in (0, 1) (f0' = 1 for layers without Fresnel), T rho' in [0.01, 20],
+orientation' = normalize(orientation + tanh(.)); W = softplus(.). ``decode`` is written against an
 array namespace so training (torch) and inference (numpy) share it.
 """
 from __future__ import annotations
@@ -90,6 +91,8 @@ class NumpyOps:
     def softplus(x):
         return np.logaddexp(x, 0.0)
 
+    clip = staticmethod(np.clip)
+
     @staticmethod
     def any_last(x):
         return x.any(axis=-1, keepdims=True)
@@ -107,13 +110,22 @@ class NumpyOps:
         return np.concatenate(parts, axis=axis)
 
 
-def _log_sigmoid_range(x, lo, hi, ops):
-    return ops.exp(math.log(lo) + ops.sigmoid(x) * (math.log(hi) - math.log(lo)))
+def _logit(x, ops, eps=1e-4):
+    x = ops.clip(x, eps, 1.0 - eps)
+    return ops.log(x) - ops.log(1.0 - x)
+
+
+def _log_range(x, lo, hi, ops, r):
+    """x moved by r in the logit of its log-position in [lo, hi]: x itself at r = 0, always inside (lo, hi)."""
+    u = (ops.log(ops.clip(x, lo, hi)) - math.log(lo)) / (math.log(hi) - math.log(lo))
+    return ops.exp(math.log(lo) + ops.sigmoid(_logit(u, ops) + r) * (math.log(hi) - math.log(lo)))
 
 
 def decode(raw, rows, ops=NumpyOps):
     """Raw network outputs (N, L * OUTPUTS + 7) and the input rows (N, L, ROW) → (lobe rows (N, L, ROW) with W1
-    folded into the albedo, Lambert weights (N, 6) = (W2r RGB, W2t RGB)). ``ops`` is the array namespace (numpy or torch)."""
+    folded into the albedo, Lambert weights (N, 6) = (W2r RGB, W2t RGB)). ``ops`` is the array namespace (numpy
+    or torch). Every lobe parameter is a residual on the layer's own value (a zero output keeps it), moved in an
+    unbounded coordinate: the logit of albedo and f0, of the log-position of α and Tρ in their ranges, atanh of g."""
     n_layers = rows.shape[1]
     layers = []
     weights = ops.softplus(raw[:, n_layers * OUTPUTS:])
@@ -122,11 +134,13 @@ def decode(raw, rows, ops=NumpyOps):
         row = rows[:, k]
         kind = row[:, rows_.TYPE:rows_.TYPE + 1]
         is_hg = kind > 1.5
-        rough = ops.where(is_hg, G_MAX * ops.tanh(r[:, 0:1]), _log_sigmoid_range(r[:, 0:1], *ALPHA_RANGE, ops))
-        albedo = ops.sigmoid(r[:, 1:4]) * weights[:, 0:1]
-        thickness = _log_sigmoid_range(r[:, 4:5], *THICKNESS_OUT, ops)
+        rough_in = row[:, rows_.ROUGHNESS:rows_.ROUGHNESS + 1]
+        g = G_MAX * ops.tanh(0.5 * _logit(0.5 + 0.5 * rough_in / G_MAX, ops) + r[:, 0:1])
+        rough = ops.where(is_hg, g, _log_range(rough_in, *ALPHA_RANGE, ops, r[:, 0:1]))
+        albedo = ops.sigmoid(_logit(row[:, rows_.ALBEDO], ops) + r[:, 1:4]) * weights[:, 0:1]
+        thickness = _log_range(row[:, rows_.THICKNESS:rows_.THICKNESS + 1], *THICKNESS_OUT, ops, r[:, 4:5])
         has_fresnel = ops.any_last(row[:, rows_.F0] < 1.0) & ~is_hg
-        f0 = ops.where(has_fresnel, ops.sigmoid(r[:, 5:8]), 1.0 + 0.0 * r[:, 5:8])
+        f0 = ops.where(has_fresnel, ops.sigmoid(_logit(row[:, rows_.F0], ops) + r[:, 5:8]), 1.0 + 0.0 * r[:, 5:8])
         o = row[:, rows_.ORIENTATION] + ops.tanh(r[:, 8:11])
         o = o / ops.sqrt(ops.sum_last(o * o) + 1e-12)
         layers.append(ops.concat([kind, rough, albedo, thickness, f0, o], axis=1))

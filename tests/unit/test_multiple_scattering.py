@@ -60,7 +60,7 @@ def test_numpy_lobe_matches_the_differentiable_training_lobe(n_layers, monkeypat
     net32 = train.make_network(n_layers)
     net32.load_state_dict({k: v.float().double() for k, v in net.state_dict().items()})
     with torch.no_grad():
-        torch_lobe = train.predicted_lobe(net32, *train.tensors(data, np.arange(6))).numpy()
+        torch_lobe = train.predicted_lobe(net32, *train.tensors(data)).numpy()
     data["ms"] = np.zeros(torch_lobe.shape)
     np.testing.assert_allclose(validation.predicted_lobes(data), torch_lobe, rtol=1e-5, atol=1e-12)
     mlp.load.cache_clear()
@@ -139,3 +139,40 @@ def test_multiple_scattering_is_refused_beyond_two_layers():
     with pytest.raises(ParamError, match="1 or 2 layers"):
         ref.params_from_dict({"layers": [{}, {}, {}], "multiple_scattering": True})
     assert not ref.params_from_dict({"layers": [{}, {}, {}]}).multiple_scattering
+
+
+def test_training_augmentations_are_exact_symmetries_of_the_model():
+    """Permuting RGB channels and rotating/mirroring about the normal maps f_ss of one stack onto f_ss of the
+    augmented stack at the augmented directions (so they are free extra data for the Monte Carlo lobes too)."""
+    rng = np.random.default_rng(4)
+    rows = _rows(2, 5)
+    batch = {"rows": rows, "wi": np.stack([dataset.stratified_hemisphere(rng, 4) for _ in range(5)]),
+             "wo": np.stack([dataset.stratified_sphere(rng, 8) for _ in range(5)])}
+
+    def single(b):
+        out = np.zeros((5, 4, 8, 3))
+        for c in range(5):
+            p = layer_rows.params_from_rows(b["rows"][c])
+            out[c] = ref.eval(p, np.repeat(b["wi"][c], 8, 0), np.tile(b["wo"][c], (4, 1))).reshape(4, 8, 3)
+        return out
+
+    batch["ms"] = single(batch)
+    augmented = train.augment(batch, np.random.default_rng(7))
+    assert not np.allclose(augmented["wi"], batch["wi"])
+    np.testing.assert_allclose(single(augmented), augmented["ms"], rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("n_layers", [1, 2])
+def test_a_zero_network_output_keeps_the_layer_parameters(n_layers):
+    rows = _rows(n_layers, 16)
+    raw = np.zeros((16, n_layers * ms.OUTPUTS + ms.WEIGHT_OUTPUTS))
+    lobes, weights = ms.decode(raw, rows)
+    for k in range(n_layers):
+        kind = rows[:, k, layer_rows.TYPE]
+        flake = kind < 2
+        np.testing.assert_allclose(lobes[flake, k, layer_rows.ROUGHNESS],
+                                   np.clip(rows[flake, k, layer_rows.ROUGHNESS], *ms.ALPHA_RANGE), rtol=1e-6)
+        np.testing.assert_allclose(lobes[:, k, layer_rows.THICKNESS], rows[:, k, layer_rows.THICKNESS], rtol=1e-6)
+        np.testing.assert_allclose(lobes[:, k, layer_rows.ALBEDO] / np.log(2.0),
+                                   np.clip(rows[:, k, layer_rows.ALBEDO], 1e-4, 1 - 1e-4), rtol=1e-6)
+    np.testing.assert_allclose(weights, np.log(2.0))
