@@ -57,6 +57,10 @@ class NumpyBackend:
     def normal(self):
         return np.broadcast_to(np.array([0.0, 0.0, 1.0]), (self.n, 3))
 
+    def upper_hemisphere(self, d):
+        """The unit direction ``d`` (from ``direction``), or −d where it points below the tangent plane."""
+        return np.where(d[:, 2:3] < 0.0, -d, d)
+
     def dot(self, a, b):
         return np.einsum("ij,ij->i", a, b)
 
@@ -112,6 +116,18 @@ class NumpyBackend:
         """The summed weight of transparent closures (light passing straight through), (N, 3)."""
         return sum((np.broadcast_to(c, (self.n, 3)) for k, c, _ in self.closures if k == "transparent"),
                    np.zeros((self.n, 3)))
+
+    def sampling_leak_blender42(self) -> np.ndarray:
+        """Blender 4.2 only, (N, 3): what its GGX sampling adds under a uniform environment of radiance 1 reached
+        by BSDF sampling alone (the furnace scene), from light below a tilted closure normal that evaluation
+        gives 0 (``closures_np.ggx_sampling_leak``); zero for closures around the shading normal."""
+        from . import closures_np
+
+        out = np.zeros((self.n, 3))
+        for kind, color, kw in self.closures:
+            if kind == "ggx":
+                out += color * closures_np.ggx_sampling_leak(self.wo, **kw)
+        return out
 
     def evaluate(self, wi: np.ndarray) -> np.ndarray:
         """The BSDF value (no cosine) that the recorded closures give for light from ``wi``."""
@@ -212,6 +228,9 @@ class OslBackend:
 
     def normal(self):
         return OslValue("N", "normal")
+
+    def upper_hemisphere(self, d):
+        return self._let(OslValue(f"dot({d.code}, N) < 0.0 ? -{d.code} : {d.code}", "normal"))
 
     def dot(self, a, b):
         return self._let(OslValue(f"dot({a.code}, {b.code})", "float"))

@@ -115,6 +115,11 @@ class NodeBackend:
     def normal(self):
         return NodeValue(self, self.geometry()[0], "color", 1)
 
+    def upper_hemisphere(self, d: NodeValue) -> NodeValue:
+        """``d``, or −d where it points below the tangent plane: d · (1 − 2 [d·N < 0])."""
+        below = self.step_below(self.dot(d, self.normal()), 0.0)
+        return self.scale(d, 1.0 - 2.0 * below)
+
     def dot(self, a, b):
         return self._vector("DOT_PRODUCT", a, b, out="Value")
 

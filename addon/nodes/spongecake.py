@@ -7,7 +7,19 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
 * surface flakes: reflection = γ · ½(1 − τ²) · GGX(α) around the flake normal, with Schlick F(f0).
   Exact for Tρ → ∞ with the normal along n (research notes §1: thick surface flakes = ½ GGX with
   height-correlated Smith); the (1 − τ²) factor is G of Eq. 12 at Λi = Λo. [approx: mirror-G]
-  A tilted flake normal keeps the GGX lobe around it. [approx: tilted-flakes]
+  A flake normal below the tangent plane is flipped up (S is the same for ±n; Cycles would render almost
+  nothing around it). A tilted flake normal keeps the GGX lobe around it [approx: tilted-flakes], and
+  Cycles renders that lobe its own way, which the numpy prediction models (``closures_np``; read in Cycles'
+  kernel, measured in both forms on 4.2 and 5.0): it foreshortens light with the closure's normal,
+  cos(n, ωi) instead of cos θi, and where the mirror direction of ωo about n falls below the surface it
+  turns n towards the shading normal (``ensure_valid_specular_reflection``: the material's Bump Map
+  Correction, on by default; with it off Cycles keeps n and the prediction is off at those views). Light
+  below the surface gives nothing. Limitation, Blender 4.2 only: its GGX sampling keeps reflections below a
+  tilted closure normal (above the surface) that its evaluation gives 0, so under environment light reached
+  by BSDF sampling it renders more than any BSDF predicts (rel. RMSE 1.5–2.5 % in the white furnace for
+  tilted flakes, whose uniform world Cycles reaches by BSDF sampling alone; ``NumpyBackend.
+  sampling_leak_blender42`` gives that excess; a light-sampled world weights it by the BSDF's MIS weight).
+  5.0 rejects those samples. Suns are unaffected.
 * fiber layers: the same with an anisotropic GGX, exact for in-plane fibers (see ``_fiber_lobe``).
 * transmission (no substrate): Lambert translucency carrying a single-scattering transmittance estimate
   γ · p · path · G_t: p the share of scattering that leaves downwards for light along the normal, path the
@@ -46,7 +58,8 @@ def _one(**layer):
 APPROXIMATIONS = {
     "mirror-G": ("Eq. 12's G evaluated at Λi = Λo (thin layers; exact when thick)",
                  _one(type="surface", roughness=0.3, thickness=0.3)),
-    "tilted-flakes": ("a tilted flake normal keeps an isotropic GGX lobe around it",
+    "tilted-flakes": ("a tilted flake normal keeps an isotropic GGX lobe around it (Cycles foreshortens it with "
+                      "that normal)",
                       _one(type="surface", roughness=0.3, thickness=1e4, orientation=[0.5, 0, 0.866])),
     "tilted-fiber": ("fibers leaving the tangent plane mix the in-plane GGX lobe and the along-normal Lambert lobe",
                      _one(type="fiber", roughness=0.3, thickness=1e4, orientation=[0.707, 0, 0.707])),
@@ -254,6 +267,8 @@ def _layer_terms(b, name: str, layer: model.Layer, mu) -> dict:
     sigma = sigma_60 = 1.0
     if layer.is_flake:
         direction = b.direction(b.input(name + "Orientation", "vector"))
+        if layer.type == "surface":  # S is the same for ±n (two-sided flakes): the closure normal points up
+            direction = b.upper_hemisphere(direction)
         c, c_n = b.dot_view(direction), b.dot(direction, b.normal())
         a2 = rough * rough
         # σ(ω) = sqrt(ωᵀ S ω) for S of Sec. 3.3 rotated to the orientation (research notes §1)

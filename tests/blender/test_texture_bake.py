@@ -202,12 +202,8 @@ def _render_halves(param, form, folder):
     return img, halves, predicted, received
 
 
-TILTED = pytest.mark.xfail(strict=True, reason="tilted flakes: Cycles does not render what the numpy backend "
-                           "predicts for an orientation off the normal, with a constant orientation too (mapping issue)")
-
-
 @pytest.mark.parametrize("form", ["nodes", "osl"])
-@pytest.mark.parametrize("param", [pytest.param(p, marks=TILTED) if p == "orientation" else p for p in sorted(CASES)])
+@pytest.mark.parametrize("param", sorted(CASES))
 def test_cycles_renders_each_half_as_predicted_for_its_parameters(param, form, saved, strong_network):
     img, halves, predicted, received = _render_halves(param, form, saved)
     for half, mask in halves.items():

@@ -130,3 +130,75 @@ def test_downward_shares_match_the_sggx_phase_function(alpha):
     assert abs(shares[("surface", 1)] - sampled(sggx.surface(np.array([0.0, 0, 1]), alpha))) < noise
     assert abs(shares[("fiber", 1)] - sampled(sggx.fiber(np.array([0.0, 0, 1]), alpha))) < noise
     assert abs(shares[("fiber", 0)] - sampled(sggx.fiber(np.array([1.0, 0, 0]), alpha))) < 0.01 + noise
+
+
+def _tilted_normals(n, seed):
+    v = _dirs(n, seed)
+    v[:, 2] = np.maximum(v[:, 2], 0.3)
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def test_cycles_bends_a_tilted_closure_normal_only_where_the_mirror_direction_leaves_the_surface():
+    """closures_np.ensure_valid_specular_reflection, as Cycles' kernel states it: unchanged where the mirror
+    direction of wo is above min(0.9 cos θo, 0.01); elsewhere turned towards z in the plane of n and z until
+    the mirror direction is exactly at that threshold."""
+    n, wo = _tilted_normals(4000, 21), _dirs(4000, 22)
+    bent = closures_np.ensure_valid_specular_reflection(n, wo)
+    threshold = np.minimum(0.9 * wo[:, 2], 0.01)
+    r_z = lambda m: 2.0 * np.einsum("ij,ij->i", m, wo) * m[:, 2] - wo[:, 2]  # noqa: E731
+    valid = r_z(n) >= threshold
+    assert 0.05 < (~valid).mean() < 0.95
+    np.testing.assert_array_equal(bent[valid], n[valid])
+    b, m = bent[~valid], n[~valid]
+    np.testing.assert_allclose(np.linalg.norm(b, axis=1), 1.0, rtol=1e-12)
+    np.testing.assert_allclose(r_z(bent)[~valid], threshold[~valid], atol=1e-9)
+    assert np.all(b[:, 2] > m[:, 2])  # towards z
+    np.testing.assert_allclose(np.cross(m, b)[:, 2], 0.0, atol=1e-12)  # same azimuth: in the plane of n and z
+    assert np.all(np.einsum("ij,ij->i", m[:, :2], b[:, :2]) >= 0.0)
+
+
+def test_a_tilted_ggx_closure_is_foreshortened_by_its_own_normal():
+    """What Cycles renders for a GGX closure around a tilted n (where n needs no bending): GGX in n's frame
+    times cos(n, ωi), i.e. as a BSDF w.r.t. z, f_n · cos(n, ωi) / cos θi; light below the surface gives 0."""
+    normal = np.array([0.5, 0.0, np.sqrt(0.75)])
+    wi, wo = np.concatenate([_dirs(1500, 23), _dirs(1500, 27, lower=True)]), _dirs(3000, 24)
+    wo = wo[closures_np.ensure_valid_specular_reflection(np.tile(normal, (len(wo), 1)), wo)[:, 2] == normal[2]]
+    wi = np.random.default_rng(28).permutation(wi)[: len(wo)]
+    # rotation taking normal to z (about y)
+    c, s = normal[2], normal[0]
+    rot = np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
+    np.testing.assert_allclose(rot @ normal, [0, 0, 1], atol=1e-15)
+    f = closures_np.ggx_reflection(wi, wo, 0.3, normal=normal)
+    in_frame = closures_np.ggx_reflection(wi @ rot.T, wo @ rot.T, 0.3)
+    expected = in_frame * ((wi @ normal) / wi[:, 2] * (wi[:, 2] > 0))[:, None]
+    np.testing.assert_allclose(f, expected, rtol=1e-9, atol=1e-300)
+    assert np.any((wi[:, 2] < 0) & (wi @ normal > 0) & (in_frame[:, 0] > 0))  # the case that must give 0
+
+
+def test_blender_4_2_sampling_leak_only_for_a_normal_off_the_shading_normal():
+    wo = _dirs(20, 25)
+    assert np.all(closures_np.ggx_sampling_leak(wo, 0.3) == 0.0)
+    leak = closures_np.ggx_sampling_leak(wo, 0.3, normal=[0.5, 0.0, np.sqrt(0.75)])
+    assert np.all(leak >= 0) and leak.max() > 1e-3
+    p = model.params_from_dict({"layers": [{"type": "fiber", "orientation": [0.7, 0.0, 0.7]}]})
+    _, b = _predict(p, _dirs(20, 26), wo)
+    assert np.all(b.sampling_leak_blender42() == 0.0)
+
+
+@pytest.mark.parametrize("form", ["osl", "nodes"])
+def test_a_flake_normal_below_the_tangent_plane_maps_like_its_opposite(form):
+    """S = α²I + (1 − α²)nnᵀ is the same for ±n (two-sided flakes; the reference agrees): the closure normal
+    is flipped up instead of pointing into the surface, where Cycles would render almost nothing."""
+    from addon.reference import spongecake as reference
+
+    wi, wo = _dirs(500, 31), _dirs(500, 32)
+    f = {}
+    for sign in (1.0, -1.0):
+        layer = {"type": "surface", "roughness": 0.3, "thickness": 0.5, "f0": [0.3, 0.3, 0.3],
+                 "orientation": [sign * -0.5, 0.0, sign * 0.866]}
+        p = model.params_from_dict({"layers": [layer]})
+        f[sign], _ = _predict(p, wi, wo, form)
+        f[sign, "reference"] = reference.eval(p, wi, wo)
+    np.testing.assert_allclose(f[-1.0, "reference"], f[1.0, "reference"], rtol=1e-12)
+    np.testing.assert_allclose(f[-1.0], f[1.0], rtol=1e-12, atol=1e-300)
+    assert f[1.0].max() > 0.1
