@@ -7,7 +7,14 @@ The multiple-scattering part of f for a stack of 1 or 2 layers (no substrate, li
 where params' has the same layer types, count and Fresnel structure as params. The paper's single
 Lambertian weight W2 is split into reflection and transmission weights, because a thick layer sends far more
 multiply scattered light back than through, and each is RGB, because multiple scattering is more saturated
-than single scattering (γ^n) and grey Lambert weights cannot follow it (docs/training.md). Light from below is the prediction for the flipped stack.
+than single scattering (γ^n) and grey Lambert weights cannot follow it (docs/training.md).
+
+The prediction is chosen by the side of the viewer: for wo above, the network's prediction for the stack;
+for wo below, its prediction for the flipped stack (layers reversed, orientations mirrored). Reflection above
+is what the network was trained on; transmission with the light below and the viewer above is, by reciprocity
+of the true BSDF, the training case with wi and wo swapped, and the predicted lobe is itself reciprocal
+(f_ss and the Lambert terms are). Choosing by the viewer's side is also what Cycles can do: closure weights
+depend on the view only, so the rendered material and ``eval`` agree for light from either side.
 W1 is folded into the lobe's albedo (f_ss is linear in it), so a prediction is a lobe ``Params`` plus W2r and W2t.
 
 Encoding (per layer, ``FEATURES`` = 14 inputs): type one-hot (3); roughness as log alpha mapped from
@@ -158,7 +165,7 @@ def predict_rows(rows: np.ndarray):
 
 @dataclass(frozen=True)
 class Prediction:
-    """The multiple-scattering lobes of one stack for light from above and from below (the flipped stack)."""
+    """The multiple-scattering lobes of one stack seen from above and from below (the flipped stack's)."""
 
     lobe: model.Params
     reflection: tuple  # W2r, RGB
@@ -187,10 +194,9 @@ def eval_multiple(params: model.Params, wi: np.ndarray, wo: np.ndarray, predicti
     from ..reference import spongecake as reference
 
     pred = prediction or predict(params)
-    up_i = wi[:, 2] > 0
+    up = (wo[:, 2] > 0)[:, None]  # the viewer's side picks the prediction (module docstring)
     same = (wi[:, 2] > 0) == (wo[:, 2] > 0)
-    f = np.where(up_i[:, None], reference.eval(pred.lobe, wi, wo), reference.eval(pred.lobe_below, wi, wo))
-    up = up_i[:, None]
+    f = np.where(up, reference.eval(pred.lobe, wi, wo), reference.eval(pred.lobe_below, wi, wo))
     w2r = np.where(up, pred.reflection, pred.reflection_below)
     w2t = np.where(up, pred.transmission, pred.transmission_below)
     f = f + np.where(same[:, None], w2r, w2t) / np.pi
