@@ -85,6 +85,10 @@ class LAMINA_PT_compare(bpy.types.Panel):
         col.prop(settings, "samples")
         col.prop(settings, "resolution")
         col.prop(settings, "scene")
+        col.prop(settings, "multiple_scattering")
+        if settings.multiple_scattering:
+            col.prop(settings, "ms_paths")
+            col.prop(settings, "ms_stride")
         layout.operator("lamina.compare", icon="IMAGE_REFERENCE")
         for line in settings.last_report.splitlines():
             layout.label(text=line)
