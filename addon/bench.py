@@ -311,9 +311,13 @@ def weights_note() -> str:
             parts.append(f"{n}-layer network missing")
             continue
         placeholder = " — placeholder weights from a tiny run" if m.get("training_configs", 0) < 100 else ""
+        noise = m.get("dataset_noise", {})
+        noise_note = (f", {m.get('paths_per_wi', '?')} paths per wi: Monte Carlo standard error "
+                      f"{noise['ms_relative_se']:.0%} RMS per pair relative to the mean lobe, the walk's order 1 "
+                      f"within {noise['order1_relative_mae']:.1%} of the closed form" if noise else "")
         parts.append(f"{n}-layer network trained on {m.get('training_configs', '?')} configurations × "
-                     f"{m.get('pairs_per_config', '?')} direction pairs ({m.get('date', '?')}, "
-                     f"{m.get('code_version', '?')}){placeholder}")
+                     f"{m.get('pairs_per_config', '?')} direction pairs{noise_note} ({m.get('date', '?')}, "
+                     f"{m.get('code_version', '?')}, {m.get('training_seconds', '?')} s){placeholder}")
     return "; ".join(parts) + "."
 
 
