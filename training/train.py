@@ -214,7 +214,8 @@ def code_version() -> str:
     try:
         rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
                              check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "training", "addon/bake"], cwd=root,
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "training", "addon/bake",
+                                ":(exclude)addon/bake/weights"], cwd=root,
                                capture_output=True, text=True, check=True).stdout.strip()
         return rev + ("+local changes" if dirty else "")
     except (OSError, subprocess.CalledProcessError):
