@@ -209,6 +209,21 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
                  "train_configs": int(len(train_idx)), "split_validation_configs": int(n_val), "val_index": val}
 
 
+def record_held_out(path: Path, held_out: Path) -> dict:
+    """Score the exported weights file on the held-out set exactly as the add-on runs it (numpy, float32
+    weights, the viewer-side choice of prediction) and record the result in its manifest."""
+    mlp.load.cache_clear()
+    shipped = mlp.load(path)
+    n_layers = shipped.manifest["layers"]
+    data = dataset.load(held_out, n_layers)
+    scores = validation.lobe_errors(data, validation.predicted_lobes(data, shipped))
+    manifest = {**shipped.manifest, "held_out_validation": {k: v for k, v in scores.items() if k != "per_config"},
+                "held_out_per_config": scores["per_config"]}
+    mlp.save(path, shipped.weights, shipped.biases, manifest)
+    mlp.load.cache_clear()
+    return manifest
+
+
 def code_version() -> str:
     root = Path(__file__).resolve().parents[1]
     try:
@@ -236,13 +251,12 @@ def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path
         "training_seconds": info["seconds"], "split_validation": split, "dataset_noise": dataset.noise(data),
         "date": datetime.date.today().isoformat(), "code_version": code_version(),
     }
-    if held_out is not None and (held_out / f"layers{n_layers}").exists():
-        scores = lobe_errors(net, dataset.load(held_out, n_layers))
-        manifest["held_out_validation"] = {k: v for k, v in scores.items() if k != "per_config"}
-        manifest["held_out_per_config"] = scores["per_config"]
     path = Path(out) / ms.weights_path(n_layers).name
     exported = to_mlp(net, manifest)
     mlp.save(path, exported.weights, exported.biases, manifest)
+    if held_out is not None and (held_out / f"layers{n_layers}").exists():
+        record_held_out(path, held_out)
+        manifest = mlp.load(path).manifest
     log(f"wrote {path}: " + json.dumps({k: manifest[k] for k in ("training_configs", "epochs", "split_validation")}))
     return manifest
 
@@ -257,8 +271,15 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quick", action="store_true", help="a few seconds of training (tests)")
+    ap.add_argument("--rescore", action="store_true",
+                    help="only re-score the weights in --out on --validation and record it in their manifests")
     a = ap.parse_args(argv)
     torch.set_num_threads(a.threads)
+    if a.rescore:
+        for n_layers in a.layers:
+            scores = record_held_out(Path(a.out) / ms.weights_path(n_layers).name, a.validation)
+            print(json.dumps({"layers": n_layers, **scores["held_out_validation"]}))
+        return 0
     for n_layers in a.layers:
         data = dataset.load(a.data, n_layers)
         minutes = 0.05 if a.quick else a.minutes

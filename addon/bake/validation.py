@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from . import layer_rows
-from .spongecake import eval_multiple
+from .spongecake import eval_multiple, predict_with
 
 ARRAYS = ("rows", "wi", "wo", "ms", "ms_half_diff", "ss")
 
@@ -30,14 +30,16 @@ def load_shards(folder, n_layers: int) -> dict:
     return out
 
 
-def predicted_lobes(data: dict) -> np.ndarray:
-    """The network's multiple-scattering lobe f_ms |cos wo| at every stored pair, (C, n_wi, n_wo, 3)."""
+def predicted_lobes(data: dict, net=None) -> np.ndarray:
+    """The network's multiple-scattering lobe f_ms |cos wo| at every stored pair, (C, n_wi, n_wo, 3), exactly as
+    the add-on evaluates it (``eval_multiple``), with the shipped network or ``net`` (an ``mlp.MLP``)."""
     out = np.zeros(data["ms"].shape)
     for c, rows in enumerate(data["rows"]):
         params = layer_rows.params_from_rows(rows)
         wi, wo = data["wi"][c].astype(float), data["wo"][c].astype(float)
         big_wi, big_wo = np.repeat(wi, len(wo), axis=0), np.tile(wo, (len(wi), 1))
-        f = eval_multiple(params, big_wi, big_wo) * np.abs(big_wo[:, 2:])
+        prediction = None if net is None else predict_with(net, params)
+        f = eval_multiple(params, big_wi, big_wo, prediction) * np.abs(big_wo[:, 2:])
         out[c] = f.reshape(out[c].shape)
     return out
 
