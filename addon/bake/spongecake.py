@@ -179,14 +179,21 @@ class Prediction:
 def predict(params: model.Params) -> Prediction:
     if len(params.layers) > model.MS_MAX_LAYERS:
         raise ValueError(f"multiple scattering supports 1 or {model.MS_MAX_LAYERS} layers, got {len(params.layers)}")
-    return predict_with(network(len(params.layers)), params)
+    return _prediction(*predict_rows(_both_sides(params)))
 
 
 def predict_with(net: mlp.MLP, params: model.Params) -> Prediction:
     """``predict`` with a given network (e.g. one being exported), uncached."""
+    both = _both_sides(params)
+    return _prediction(*decode(net(features(both)), both))
+
+
+def _both_sides(params: model.Params) -> np.ndarray:
     rows = rows_.stack_rows(params)
-    both = np.stack([rows, rows_.flipped(rows)])
-    lobes, weights = decode(net(features(both)), both)
+    return np.stack([rows, rows_.flipped(rows)])
+
+
+def _prediction(lobes, weights) -> Prediction:
     above = rows_.params_from_rows(lobes[0])
     below = rows_.params_from_rows(rows_.flipped(lobes[1]))
     return Prediction(above, tuple(weights[0, 0:3]), tuple(weights[0, 3:6]),
