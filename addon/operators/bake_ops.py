@@ -23,6 +23,7 @@ from ..bake.exr import atomic_path
 from ..bake.textures import BakeError
 from ..nodes import material as lamina_material
 from ..nodes import texture_wiring
+from .progress import end_modal
 
 
 class MaterialError(BakeError):
@@ -213,10 +214,5 @@ class LAMINA_OT_bake_textures(bpy.types.Operator):
         return {"FINISHED"}
 
     def _cleanup(self, context):
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
-        if context.workspace is not None:
-            context.workspace.status_text_set(None)
+        end_modal(context, self._timer)
+        self._timer = None

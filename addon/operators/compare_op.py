@@ -8,6 +8,7 @@ import bpy
 
 from ..nodes import material as lamina_material
 from . import compare_run
+from .progress import end_modal
 
 SCENE_ITEMS = [("ALL", "All scenes", "")] + [(s, s.capitalize(), "") for s in compare_run.SCENES]
 
@@ -126,12 +127,7 @@ class LAMINA_OT_compare(bpy.types.Operator):
         return {"FINISHED"}
 
     def _cleanup(self, context):
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
-        if context.workspace is not None:
-            context.workspace.status_text_set(None)
+        end_modal(context, self._timer)
+        self._timer = None
 
 

@@ -411,6 +411,34 @@ def _slots(group_of_pair, pair_index, n_groups):
     return slots
 
 
+def _start(params: Params, sources, n_paths: int):
+    """Walk state (depth z, direction, throughput, layer, at-substrate flag, source index) of ``n_paths`` paths
+    per source direction, entering through the top (light from above) or the bottom."""
+    group = np.repeat(np.arange(len(sources)), n_paths)
+    d = -sources[group]
+    from_below = d[:, 2] > 0
+    z = np.where(from_below, float(len(params.layers)), 0.0)
+    surface = from_below & (params.substrate is not None)
+    return z, d, np.ones((len(z), 3)), np.zeros(len(z), int), surface, group
+
+
+def _fly(params: Params, state, rng):
+    """Free flight of every path not at the substrate: (paths that collided or reached the substrate,
+    (throughput, source index) of the paths that left the stack)."""
+    z, d, beta, layer, surface, group = state
+    fly = ~surface
+    z_f, layer_f, collided = _free_flight(params, z[fly], d[fly], rng)
+    z[fly], layer[fly] = z_f, layer_f
+    reach_substrate = np.zeros_like(surface)
+    if params.substrate is not None:
+        reach_substrate[fly] = ~collided & (d[fly, 2] < 0)
+    alive = surface | reach_substrate
+    alive[fly] |= collided
+    escaped = ~alive
+    state = tuple(a[alive] for a in (z, d, beta, layer, surface | reach_substrate, group))
+    return state, (beta[escaped], group[escaped])
+
+
 def ground_truth(params: Params, wi, wo, n_paths: int = 20000, seed: int = 0, max_depth: int = 20):
     """Independent Monte Carlo f(wi, wo) by a volumetric random walk: (order 1, orders >= 2), each (N, 3).
 
@@ -423,28 +451,13 @@ def ground_truth(params: Params, wi, wo, n_paths: int = 20000, seed: int = 0, ma
     if not ok.any():
         return tuple(sums)
     rng = np.random.default_rng(seed)
-    n_layers = len(params.layers)
     sources, group_of_pair = np.unique(wi[ok], axis=0, return_inverse=True)
     slots = _slots(group_of_pair.ravel(), np.flatnonzero(ok), len(sources))
     kappa_o = _exit_depths(params, wo)
 
-    group = np.repeat(np.arange(len(sources)), n_paths)
-    d = -sources[group]
-    from_below = d[:, 2] > 0
-    z = np.where(from_below, float(n_layers), 0.0)
-    surface = from_below & (params.substrate is not None)
-    state = (z, d, np.ones((len(z), 3)), np.zeros(len(z), int), surface, group)
+    state = _start(params, sources, n_paths)
     for depth in range(max_depth):
-        z, d, beta, layer, surface, group = state
-        fly = ~surface
-        z_f, layer_f, collided = _free_flight(params, z[fly], d[fly], rng)
-        z[fly], layer[fly] = z_f, layer_f
-        reach_substrate = np.zeros_like(surface)
-        if params.substrate is not None:
-            reach_substrate[fly] = ~collided & (d[fly, 2] < 0)
-        alive = surface | reach_substrate
-        alive[fly] |= collided
-        state = tuple(a[alive] for a in (z, d, beta, layer, surface | reach_substrate, group))
+        state, _ = _fly(params, state, rng)
         if len(state[0]) == 0:
             break
         _nee(params, state, wo, kappa_o, slots, sums[min(depth, 1)])
@@ -461,28 +474,11 @@ def ground_truth_albedo(params: Params, wo, n_paths: int = 20000, seed: int = 0,
     wo = as_directions(wo)
     tallies = [np.zeros((len(wo), 3)) for _ in range(3)]
     rng = np.random.default_rng(seed)
-    n_layers = len(params.layers)
-    group = np.repeat(np.arange(len(wo)), n_paths)
-    d = -wo[group]
-    from_below = d[:, 2] > 0
-    z = np.where(from_below, float(n_layers), 0.0)
-    surface = from_below & (params.substrate is not None)
-    state = (z, d, np.ones((len(z), 3)), np.zeros(len(z), int), surface, group)
+    state = _start(params, wo, n_paths)
     for depth in range(max_depth):
-        z, d, beta, layer, surface, group = state
-        fly = ~surface
-        z_f, layer_f, collided = _free_flight(params, z[fly], d[fly], rng)
-        z[fly], layer[fly] = z_f, layer_f
-        reach_substrate = np.zeros_like(surface)
-        if params.substrate is not None:
-            reach_substrate[fly] = ~collided & (d[fly, 2] < 0)
-        escaped = np.zeros_like(surface)
-        escaped[fly] = ~collided & ~reach_substrate[fly]
+        state, (beta, group) = _fly(params, state, rng)
         for c in range(3):
-            tallies[min(depth, 2)][:, c] += np.bincount(group[escaped], weights=beta[escaped, c], minlength=len(wo))
-        alive = surface | reach_substrate
-        alive[fly] |= collided
-        state = tuple(a[alive] for a in (z, d, beta, layer, surface | reach_substrate, group))
+            tallies[min(depth, 2)][:, c] += np.bincount(group, weights=beta[:, c], minlength=len(wo))
         if len(state[0]) == 0 or depth + 1 == max_depth:
             break
         state = _scatter(params, state, rng)
