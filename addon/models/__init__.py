@@ -1,4 +1,4 @@
 """bpy-free model declarations. ``MODELS`` maps a model id to its declaration module."""
-from . import spongecake
+from . import micrograin, spongecake
 
-MODELS = {spongecake.ID: spongecake}
+MODELS = {spongecake.ID: spongecake, micrograin.ID: micrograin}
