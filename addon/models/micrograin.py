@@ -23,6 +23,7 @@ MAX_FILLING = 0.98  # Sec. 4.2: keeps the largest equivalent roughness above 0.5
 MIN_ANFRACTUOSITY = 1e-3
 GRAIN_TYPES = ("diffuse", "dielectric", "conductor")
 SIMPLE_BULKS = ("diffuse", "conductor", "dielectric")
+WRAPPED = "shader"  # the bulk is a material's own shader (Add Porous Layer): Cycles only, no reference
 GAF_TYPES = ("series", "ggx")
 
 LAYER = (
@@ -112,6 +113,8 @@ def _plain(v):
 
 
 def _bulk_dict(bulk: Bulk) -> dict:
+    if bulk.type == WRAPPED:
+        return {"type": WRAPPED}
     if bulk.type in SIMPLE_BULKS:
         return {"type": bulk.type, **{p.name: _plain(getattr(bulk.params, p.name))
                                       for p in spongecake.SUBSTRATE[bulk.type]}}
@@ -185,13 +188,17 @@ def _read_grain(d, warnings: list[str]) -> Grain:
 def bulk_types() -> tuple[str, ...]:
     from . import MODELS
 
-    return SIMPLE_BULKS + tuple(m for m in MODELS if m != ID)
+    return SIMPLE_BULKS + tuple(m for m in MODELS if m != ID) + (WRAPPED,)
 
 
 def _read_bulk(d, warnings: list[str]) -> Bulk:
     if not isinstance(d, dict) or d.get("type") not in bulk_types():
         raise ParamError(f"bulk: expected a dict with type in {', '.join(bulk_types())}, got {d!r}")
     rest = {k: v for k, v in d.items() if k != "type"}
+    if d["type"] == WRAPPED:
+        if rest:
+            raise ParamError(f"bulk: a wrapped shader takes no parameters, got {', '.join(sorted(rest))}")
+        return Bulk(WRAPPED, None)
     if d["type"] in SIMPLE_BULKS:
         fields = read_fields(spongecake.SUBSTRATE[d["type"]], rest, "bulk: ", warnings)
         return Bulk(d["type"], spongecake.Substrate(d["type"], **fields))

@@ -1,16 +1,19 @@
 """Cycles shaders generated from each model's mapping (``<model>.py``, bpy-free) in two forms:
 a native node group (``node_backend``) and an OSL script node (``osl``); ``material`` assembles them."""
-from . import spongecake
+from . import bulk, micrograin, spongecake
 
-MAPPINGS = {"spongecake": spongecake}
+# Model id -> mapping; "bulk" is the simple BSDFs that reference bulks under a porous layer are made of.
+MAPPINGS = {"spongecake": spongecake, "micrograin": micrograin, bulk.ID: bulk}
 FORMS = ("nodes", "osl")  # node group (every device) and OSL script (CPU, OptiX)
 
 
 def _backend(model_id: str, p, form: str, wo):
     from .expr import NumpyBackend
 
-    b = NumpyBackend(wo, MAPPINGS[model_id].input_values(p), form)
-    MAPPINGS[model_id].shade(b, p)
+    mapping = MAPPINGS[model_id]
+    bulk = mapping.numpy_bulk(p, form) if hasattr(mapping, "numpy_bulk") else None
+    b = NumpyBackend(wo, mapping.input_values(p), form, bulk)
+    mapping.shade(b, p)
     return b
 
 

@@ -24,6 +24,10 @@ MIN_COS = 1e-6
 TANGENT_INPUT = "LaminaTangent"
 # A direction projected into the tangent plane shorter than this is replaced by the default tangent.
 MIN_TANGENT = 1e-6
+# Smallest argument of a logarithm (float32-safe: its log is finite).
+MIN_LOG = 1e-30
+# The Shader input that carries the material a model wraps (micrograin's bulk).
+BULK_INPUT = "Bulk"
 
 
 # --------------------------------------------------------------------------------------------- numpy
@@ -32,11 +36,12 @@ MIN_TANGENT = 1e-6
 class NumpyBackend:
     """Evaluate a mapping in float64 for N view directions ``wo`` (local frame, z = normal)."""
 
-    def __init__(self, wo: np.ndarray, inputs: dict, form: str = "osl"):
+    def __init__(self, wo: np.ndarray, inputs: dict, form: str = "osl", bulk=None):
         self.form = form  # "osl" or "nodes": which Cycles form to predict
         self.wo = np.asarray(wo, dtype=np.float64)
         self.n = len(self.wo)
         self._inputs = inputs
+        self._bulk = bulk  # wo -> NumpyBackend holding the closures of the shader plugged into a Shader input
         self.closures: list[tuple] = []
 
     # -- inputs and geometry
@@ -75,8 +80,10 @@ class NumpyBackend:
 
     # -- math
     exp = staticmethod(np.exp)
+    log = staticmethod(lambda x: np.log(np.maximum(x, MIN_LOG)))
     sqrt = staticmethod(lambda x: np.sqrt(np.maximum(x, 0.0)))
     maximum = staticmethod(np.maximum)
+    minimum = staticmethod(np.minimum)
     abs = staticmethod(np.abs)
 
     @staticmethod
@@ -111,6 +118,11 @@ class NumpyBackend:
 
     def dielectric(self, color, alpha, ior):
         self._add("dielectric", color, alpha=alpha, ior=ior)
+
+    def bulk(self, weight):
+        """The shader plugged into the ``Bulk`` input, scaled by ``weight``."""
+        for kind, color, kw in self._bulk(self.wo).closures:
+            self._add(kind, np.broadcast_to(color, (self.n, 3)) * np.asarray(weight)[..., None], **kw)
 
     def transparency(self) -> np.ndarray:
         """The summed weight of transparent closures (light passing straight through), (N, 3)."""
@@ -212,6 +224,9 @@ class OslBackend:
     def input(self, name: str, kind: str):
         return OslValue(osl_identifier(name), "color" if kind in ("color", "vector") else kind)
 
+    def bulk(self, weight):
+        self._closure(weight, osl_identifier(BULK_INPUT))
+
     def _let(self, value: OslValue, kind=None) -> OslValue:
         self._count += 1
         name = f"t{self._count}"
@@ -250,6 +265,9 @@ class OslBackend:
     def exp(self, x):
         return self._call("exp", x)
 
+    def log(self, x):
+        return self._call("log", self.maximum(x, MIN_LOG))
+
     def sqrt(self, x):
         return self._call("sqrt", self.maximum(x, 0.0))
 
@@ -261,6 +279,9 @@ class OslBackend:
 
     def maximum(self, a, b):
         return self._call("max", a, b)
+
+    def minimum(self, a, b):
+        return self._call("min", a, b)
 
     def scale(self, color, s):
         return self._let(_osl(color) * s, "color")
@@ -312,10 +333,12 @@ def osl_identifier(name: str) -> str:
 
 
 def _osl_type(kind: str) -> str:
-    return {"float": "float", "color": "color", "vector": "vector"}[kind]
+    return {"float": "float", "color": "color", "vector": "vector", "shader": "closure color"}[kind]
 
 
 def _osl_default(kind: str, d) -> str:
+    if kind == "shader":
+        return "0"
     if kind == "float":
         return _num(d)
     return "{}({})".format(_osl_type(kind), ", ".join(_num(x) for x in d))

@@ -18,12 +18,14 @@ from dataclasses import replace
 import bpy
 
 from ..models import MODELS
+from ..models.micrograin import WRAPPED
 from . import FORMS, MAPPINGS, osl
-from .expr import TANGENT_INPUT, OslBackend
+from .expr import BULK_INPUT, TANGENT_INPUT, OslBackend
 from .node_backend import NodeBackend
 
 GENERATOR_VERSION = 1  # bump when generated shaders change, so cached groups are not reused
-SOCKET_TYPES = {"float": "NodeSocketFloat", "color": "NodeSocketColor", "vector": "NodeSocketVector"}
+SOCKET_TYPES = {"float": "NodeSocketFloat", "color": "NodeSocketColor", "vector": "NodeSocketVector",
+                "shader": "NodeSocketShader"}
 
 
 def content_hash(model_id: str, p) -> str:
@@ -31,8 +33,12 @@ def content_hash(model_id: str, p) -> str:
     return hashlib.md5(key.encode()).hexdigest()[:8]
 
 
+def _label(model_id: str) -> str:
+    return (MODELS[model_id] if model_id in MODELS else MAPPINGS[model_id]).LABEL
+
+
 def _base_name(model_id: str, p) -> str:
-    return f"Lamina {MODELS[model_id].LABEL} {content_hash(model_id, p)}"
+    return f"Lamina {_label(model_id)} {content_hash(model_id, p)}"
 
 
 # ------------------------------------------------------------------------------------------ node group
@@ -63,6 +69,8 @@ def _make_interface(group, sockets) -> None:
             panels[s.panel] = group.interface.new_panel(s.panel)
         item = group.interface.new_socket(s.name, in_out="INPUT", socket_type=SOCKET_TYPES[s.kind],
                                           parent=panels[s.panel], description=s.param.description)
+        if s.kind == "shader":
+            continue
         item.default_value = _socket_value(s.param.default, item.default_value)
         if s.kind == "float":
             item.min_value = s.param.min if s.param.min is not None else -1e9
@@ -137,15 +145,26 @@ def info(mat) -> dict:
 
 
 def current_params(mat):
-    """The material's parameters as they are now: the stored dict updated with the shader node's inputs."""
+    """The material's parameters as they are now: the stored dict updated with the shader node's inputs (and,
+    under a porous layer, with the inputs of the Lamina bulk node)."""
     data = info(mat)
     model_id = data["model"]
     p = MODELS[model_id].params_from_dict(data["params"])
     node = shader_node(mat)
     if node is None:
         return model_id, p
-    values = {s.name: _read_socket(node, s) for s in MAPPINGS[model_id].sockets(p) if not s.baked}
-    return model_id, _with_values(model_id, p, values)
+    p = _read_params(node, model_id, p)
+    bulk = mat.node_tree.nodes.get(BULK_NODE)
+    if bulk is not None and _has_reference_bulk(model_id, p):
+        bulk_id, params = MAPPINGS[model_id].bulk_shader(p)
+        p = replace(p, bulk=replace(p.bulk, params=_read_params(bulk, bulk_id, params)))
+    return model_id, p
+
+
+def _read_params(node, mapping_id: str, p):
+    mapping = MAPPINGS[mapping_id]
+    values = {s.name: _read_socket(node, s) for s in mapping.sockets(p) if not s.baked and s.kind != "shader"}
+    return mapping.with_values(p, values)
 
 
 def form_of(mat) -> str:
@@ -193,7 +212,7 @@ def bake_constants(mat) -> bool:
     changed; a material without multiple scattering only loses its bake key."""
     model_id, p = current_params(mat)
     node = shader_node(mat)
-    if not p.multiple_scattering or node is None:
+    if not getattr(p, "multiple_scattering", False) or node is None:
         return mat.pop(MS_KEY, None) is not None
     changed = _write_values(node, MAPPINGS[model_id].ms_values(p))
     key = ms_key(model_id, p)
@@ -210,7 +229,7 @@ def ms_enabled(mat) -> bool:
 def ms_is_stale(mat) -> bool:
     """Whether the parameters changed since the multiple-scattering inputs were last baked."""
     model_id, p = current_params(mat)
-    return p.multiple_scattering and shader_node(mat) is not None and mat.get(MS_KEY) != ms_key(model_id, p)
+    return getattr(p, "multiple_scattering", False) and shader_node(mat) is not None and mat.get(MS_KEY) != ms_key(model_id, p)
 
 
 def ms_energy_share(mat) -> float:
@@ -235,11 +254,18 @@ def shader_node(mat):
 
 def _build_tree(mat, model_id: str, p, form: str) -> None:
     """Put the Lamina node in ``form`` into the material, replacing only Lamina's own nodes (``_replace``);
-    nothing is touched if generation fails (the group is built and the OSL compiled first)."""
+    nothing is touched if generation fails (the group is built and the OSL compiled first). A porous layer's
+    reference bulk gets a Lamina node of its own (``_build_bulk``)."""
+    _replace(mat, shader_node(mat), _new_node(mat, model_id, p, form))
+    _build_bulk(mat, model_id, p, form)
+
+
+def _new_node(mat, mapping_id: str, p, form: str):
+    """A new group or script node for ``p`` with its inputs set (removed again if anything fails)."""
     if form == "nodes":
-        group = node_group(model_id, p)
+        group = node_group(mapping_id, p)
     else:
-        text = osl_text(model_id, p)
+        text = osl_text(mapping_id, p)
         oso = osl.compile_source(text.as_string())
     tree = mat.node_tree
     node = tree.nodes.new("ShaderNodeGroup" if form == "nodes" else "ShaderNodeScript")
@@ -251,11 +277,40 @@ def _build_tree(mat, model_id: str, p, form: str) -> None:
             node.label = text.name
             node.inputs[TANGENT_INPUT].hide = True
         node.width = 240
-        _write_values(node, MAPPINGS[model_id].input_values(p))
+        _write_values(node, MAPPINGS[mapping_id].input_values(p))
     except BaseException:
         tree.nodes.remove(node)
         raise
-    _replace(mat, shader_node(mat), node)
+    return node
+
+
+BULK_NODE = "Lamina Bulk"
+
+
+def _has_reference_bulk(model_id: str, p) -> bool:
+    return hasattr(MAPPINGS[model_id], "bulk_shader") and p.bulk.type != WRAPPED
+
+
+def _build_bulk(mat, model_id: str, p, form: str) -> None:
+    """A porous layer's reference bulk (a simple BSDF, always a node group, or another model in ``form``) as the
+    node ``Lamina Bulk`` feeding the layer's Bulk input, rebuilt with the layer. A shader that the user plugged
+    into the Bulk input instead is left alone."""
+    if not _has_reference_bulk(model_id, p):
+        return
+    tree = mat.node_tree
+    socket = shader_node(mat).inputs[BULK_INPUT]
+    old = tree.nodes.get(BULK_NODE)
+    if socket.is_linked and socket.links[0].from_node != old:
+        return
+    bulk_id, params = MAPPINGS[model_id].bulk_shader(p)
+    node = _new_node(mat, bulk_id, params, "nodes" if bulk_id not in MODELS else form)
+    if old is None:
+        layer = shader_node(mat)
+        node.parent = layer.parent
+        node.location = (layer.location.x - 300, layer.location.y)
+    _replace(mat, old, node, BULK_NODE)
+    if not socket.is_linked:
+        tree.links.new(node.outputs[0], socket)
 
 
 HELPER_TAG = "lamina_helper"  # Lamina's helper nodes (the Geometry node feeding the OSL form's tangent)
@@ -281,7 +336,7 @@ def _helpers(tree, old) -> list:
     return found
 
 
-def _replace(mat, old, node) -> None:
+def _replace(mat, old, node, name: str = "Lamina") -> None:
     """Swap Lamina's node ``old`` (None: a new material, or one whose Lamina node was deleted) for ``node``; every
     other node stays. Links into ``old``'s inputs go to ``node``'s inputs of the same name (inputs that no longer
     exist lose theirs), its output links are re-created, its location, width and frame kept. The OSL form gets a
@@ -308,7 +363,7 @@ def _replace(mat, old, node) -> None:
         tree.nodes.remove(old)
         if active:
             tree.nodes.active = node
-    node.name = "Lamina"
+    node.name = name
     by_name = {_norm(s.name): s for s in node.inputs}
     for key, from_socket, muted in inputs:
         if key in by_name:
@@ -317,7 +372,7 @@ def _replace(mat, old, node) -> None:
     for key, to_socket, muted in outputs:
         if key in by_name:
             tree.links.new(by_name[key], to_socket).is_muted = muted
-    if old is None:
+    if old is None and name == "Lamina":
         outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
         out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
         if out is None:
@@ -382,13 +437,3 @@ def _same(current, new) -> bool:
 def _read_socket(node, s):
     v = node.inputs[_socket_key(node, s.name)].default_value
     return float(v) if s.kind == "float" else tuple(float(x) for x in v[:3])
-
-
-def _with_values(model_id: str, p, values: dict):
-    data = p.to_dict()
-    for s in MAPPINGS[model_id].sockets(p):
-        if s.baked:
-            continue
-        target = data["substrate"] if s.layer is None else data["layers"][s.layer]
-        target[s.param.name] = values[s.name]
-    return MODELS[model_id].params_from_dict(data)

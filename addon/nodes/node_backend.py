@@ -1,9 +1,11 @@
 """The ``expr`` backend that builds Cycles shader nodes inside a node group (works on SVM, every GPU, EEVEE)."""
 from __future__ import annotations
 
+import math
+
 import bpy
 
-from .expr import MIN_COS, MIN_TANGENT, schlick_at_view
+from .expr import BULK_INPUT, MIN_COS, MIN_LOG, MIN_TANGENT, schlick_at_view
 
 COLUMN = 190
 ROW = 150
@@ -162,6 +164,9 @@ class NodeBackend:
     def exp(self, x):
         return self._math("EXPONENT", x)
 
+    def log(self, x):
+        return self._math("LOGARITHM", self.maximum(x, MIN_LOG), math.e)
+
     def sqrt(self, x):
         return self._math("SQRT", self.maximum(x, 0.0))
 
@@ -173,6 +178,9 @@ class NodeBackend:
 
     def maximum(self, a, b):
         return self._math("MAXIMUM", a, b)
+
+    def minimum(self, a, b):
+        return self._math("MINIMUM", a, b)
 
     def scale(self, color, s):
         node = self._node("ShaderNodeVectorMath", _depth(color, s), operation="SCALE")
@@ -198,6 +206,14 @@ class NodeBackend:
         self.links.new(prev, add.inputs[0])
         self.links.new(shader_socket, add.inputs[1])
         self._shader = (add.outputs[0], d)
+
+    def bulk(self, weight):
+        """The group's Shader input scaled by ``weight``: a Mix Shader towards its empty (black) second input."""
+        depth = _depth(weight) + 1
+        mix = self._node("ShaderNodeMixShader", depth)
+        self._link_or_set(1.0 - weight, mix.inputs["Fac"])
+        self.links.new(self.group_input.outputs[BULK_INPUT], mix.inputs[1])
+        self._add(mix.outputs[0], depth)
 
     def finish(self):
         if self._shader is not None:

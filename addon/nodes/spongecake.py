@@ -134,11 +134,14 @@ def sockets(p: model.Params) -> list[Socket]:
         for prm in _layer_params(layer):
             out.append(Socket(f"L{k + 1} {_label(layer, prm)}", prm.kind, prm, k))
     if p.substrate is not None:
-        for prm in model.SUBSTRATE[p.substrate.type]:
-            out.append(Socket(f"Substrate {prm.label}", prm.kind, prm, None))
+        out += substrate_sockets(p.substrate)
     if p.multiple_scattering:
         out += _ms_sockets(p)
     return out
+
+
+def substrate_sockets(s: model.Substrate) -> list[Socket]:
+    return [Socket(f"Substrate {prm.label}", prm.kind, prm, None) for prm in model.SUBSTRATE[s.type]]
 
 
 def _label(layer: model.Layer, prm: Param) -> str:
@@ -183,6 +186,16 @@ def input_values(p: model.Params) -> dict:
     return values
 
 
+def with_values(p: model.Params, values: dict) -> model.Params:
+    """``p`` with the model parameters read from the shader's inputs (socket name → value)."""
+    data = p.to_dict()
+    for s in sockets(p):
+        if not s.baked:
+            target = data["substrate"] if s.layer is None else data["layers"][s.layer]
+            target[s.param.name] = values[s.name]
+    return model.params_from_dict(data)
+
+
 def ms_values(p: model.Params) -> dict:
     """The ``MS`` socket values of the network's prediction for light from above (addon.bake.spongecake)."""
     from ..bake.spongecake import predict
@@ -205,7 +218,7 @@ def shade(b, p: model.Params) -> None:
     stack = _prod(*[t["tau"] for t in terms])
     if p.substrate is not None:
         exit_ = stack if p.substrate.type != "diffuse" else _prod(*[t["tau_exit"] for t in terms])
-        _substrate(b, p.substrate, stack * exit_)
+        shade_substrate(b, p.substrate, stack * exit_)
     if p.delta_transmission:
         b.transparent(b.scale((1.0, 1.0, 1.0), stack))
     if p.multiple_scattering:
@@ -326,7 +339,8 @@ def _fiber_lobe(b, alpha, c_n, tangent) -> dict:
             "p_down": s * down_in_plane + (1.0 - s) * (1.0 - back_along_n)}
 
 
-def _substrate(b, s: model.Substrate, weight) -> None:
+def shade_substrate(b, s: model.Substrate, weight=1.0) -> None:
+    """The substrate's closure (inputs ``substrate_sockets``) scaled by ``weight``; also a micrograin bulk."""
     white = b.scale((1.0, 1.0, 1.0), weight)
     if s.type == "diffuse":
         b.diffuse(b.scale(b.input("Substrate Albedo", "color"), weight))

@@ -1,0 +1,153 @@
+"""Micrograin porous layer → Cycles closures (both forms), written once with ``expr`` backends.
+
+The node takes the material under the grains as a Shader input (``Bulk``), so it wraps anything. Eq. 1 mixes
+the grains' BRDF f_S and the bulk's f_B with the weight w⁺(i, o) of Eq. 24, whose complement factorises as
+1 − w⁺ = g(θi) g(θo), g = sqrt(1 − τβ) (research notes §3). A closure weight cannot depend on the light, so
+g(θi) is taken at the mirror configuration θi = θo: the bulk gets 1 − τβ(θo) and the grains τβ(θo), exact at
+the specular configuration. [approx: view-only-weight] The bulk's transmission (glass) gets that weight too,
+where light really passes through the pores it sees, 1 − τ⁺(θo) (Eq. 22). [approx: bulk-transmission-weight]
+
+The grains' specular lobe is Cycles' GGX with the equivalent roughness α̃ of Eq. 18, whose D equals the
+micrograin D (Eq. 17) at h = n, i.e. at every mirror configuration. [approx: grains-as-ggx] With the
+series GAF (Eq. 25) the lobe is scaled by G_micrograin / G_GGX(α̃) at the mirror configuration
+(1 + 2Λ_GGX) / (1 + 2Λ), so the lobe is exact there; Λ is evaluated in float32 without cancellation
+(``_micrograin_lambda``). [approx: gaf-at-mirror] The specular Fresnel is exact per microfacet: a conductor
+closure, with k = 0 for dielectric grains (the complex Fresnel then equals the dielectric one). The diffuse
+part of dielectric grains is weighted by T̄(i, o) = t(θi) t(θo) taken at the mirror configuration, with the
+smooth-interface transmittance t = 1 − F(θo) in place of the rough lobe's 1 − E_spec. [approx: grain-transmittance-smooth]
+"""
+from __future__ import annotations
+
+from ..models import micrograin as model
+from ..models.params import Param
+from .expr import BULK_INPUT
+from .spongecake import Socket
+
+
+def _one(**kw) -> dict:
+    grain = kw.pop("grain", {"type": "diffuse", "albedo": [0.8, 0.8, 0.8]})
+    return {"filling_factor": 0.5, "anfractuosity": 0.5, "grain": grain,
+            "bulk": {"type": "diffuse", "albedo": [0.5, 0.5, 0.5]}, **kw}
+
+
+APPROXIMATIONS = {
+    "view-only-weight": ("w⁺(i, o) taken at the mirror configuration θi = θo (τβ of the view only)",
+                         _one(filling_factor=0.5, anfractuosity=1.0)),
+    "bulk-transmission-weight": ("the bulk's transmission weighted 1 − τβ(θo) instead of 1 − τ⁺(θo)",
+                                 _one(filling_factor=0.3, bulk={"type": "dielectric", "roughness": 0.1,
+                                                                "ior": 1.5},
+                                      grain={"type": "conductor", "ior": [1.5] * 3, "k": [0.0] * 3})),
+    "grains-as-ggx": ("micrograin D (Eq. 17) rendered as GGX with the equivalent roughness (Eq. 18)",
+                      _one(filling_factor=0.9, anfractuosity=0.5, gaf="ggx",
+                           grain={"type": "conductor", "ior": [0.2, 0.9, 1.1], "k": [3.9, 2.4, 2.1]},
+                           bulk={"type": "diffuse", "albedo": [0.0, 0.0, 0.0]})),
+    "gaf-at-mirror": ("the micrograin G (Eq. 25) applied as the ratio to GGX's at the mirror configuration",
+                      _one(filling_factor=0.9, anfractuosity=0.5,
+                           grain={"type": "conductor", "ior": [0.2, 0.9, 1.1], "k": [3.9, 2.4, 2.1]},
+                           bulk={"type": "diffuse", "albedo": [0.0, 0.0, 0.0]})),
+    "grain-transmittance-smooth": ("dielectric grains' diffuse part under t(θo)² = (1 − F(θo))², not "
+                                   "(1 − E_spec(θi))(1 − E_spec(θo))",
+                                   _one(filling_factor=0.98, anfractuosity=1.0,
+                                        grain={"type": "dielectric", "albedo": [0.8] * 3, "ior": 1.5},
+                                        bulk={"type": "diffuse", "albedo": [0.0, 0.0, 0.0]})),
+}
+
+GRAINS_PANEL = "Grains"
+BULK_PARAM = Param("bulk", "Bulk", "shader", None,
+                   description="The material under the grains (any shader: Principled, a Lamina material, ...)")
+
+
+def structure_key(p: model.Params) -> tuple:
+    return p.grain.type, p.gaf
+
+
+def sockets(p: model.Params) -> list[Socket]:
+    """The Bulk shader input, then the layer's and the grains' parameters, from the model declaration."""
+    out = [Socket(BULK_INPUT, "shader", BULK_PARAM, None, GRAINS_PANEL)]
+    out += [Socket(prm.label, prm.kind, prm, None, GRAINS_PANEL) for prm in model.LAYER + model.GRAIN[p.grain.type]]
+    return out
+
+
+def _target(p: model.Params, s: Socket):
+    return p.grain if s.param in model.GRAIN[p.grain.type] else p
+
+
+def input_values(p: model.Params) -> dict:
+    return {s.name: getattr(_target(p, s), s.param.name) for s in sockets(p) if s.kind != "shader"}
+
+
+def with_values(p: model.Params, values: dict) -> model.Params:
+    data = p.to_dict()
+    for s in sockets(p):
+        if s.kind != "shader":
+            target = data["grain"] if _target(p, s) is p.grain else data
+            target[s.param.name] = values[s.name]
+    return model.params_from_dict(data)
+
+
+def bulk_shader(p: model.Params) -> tuple[str, object]:
+    """The mapping id and parameters of what renders the reference bulk (raises for a wrapped shader)."""
+    if p.bulk.type == model.WRAPPED:
+        raise ValueError("this porous layer wraps a material's own shader, which has no reference to predict")
+    return ("bulk" if p.bulk.type in model.SIMPLE_BULKS else p.bulk.type), p.bulk.params
+
+
+def numpy_bulk(p: model.Params, form: str):
+    """``wo -> NumpyBackend`` holding what the bulk renders as (the Cycles form of a reference bulk)."""
+    from . import _backend
+
+    mapping_id, params = bulk_shader(p)
+    return lambda wo: _backend(mapping_id, params, form, wo)
+
+
+def shade(b, p: model.Params) -> None:
+    """Build the closure mix on backend ``b`` (see the module docstring)."""
+    mu = b.cos_view()
+    tau0 = b.minimum(b.maximum(b.input("Filling Factor", "float"), 0.0), model.MAX_FILLING)
+    beta = b.minimum(b.maximum(b.input("Anfractuosity", "float"), model.MIN_ANFRACTUOSITY), 1.0)
+    log_pores = b.log(1.0 - tau0)  # −P = ln(1 − τ0) (Eq. 13)
+    pores = b.exp(log_pores * b.sqrt(mu * mu + beta * beta * (1.0 - mu * mu)) / mu)  # 1 − τβ(θo) (Eq. 21)
+    grains = 1.0 - pores
+    b.bulk(pores)
+    alpha = beta * _roughness_factor(b, tau0, log_pores)
+    if p.grain.type == "diffuse":
+        b.diffuse(b.scale(b.input("Grain Albedo", "color"), grains))
+        return
+    specular = grains if p.gaf == "ggx" else grains * _gaf_ratio(b, mu, tau0, log_pores, beta, alpha)
+    if p.grain.type == "conductor":
+        b.conductor(b.scale((1.0, 1.0, 1.0), specular), alpha, b.input("Grain IOR", "color"),
+                    b.input("Grain Extinction", "color"))
+        return
+    ior = b.input("Grain IOR", "float")
+    b.conductor(b.scale((1.0, 1.0, 1.0), specular), alpha, b.scale((1.0, 1.0, 1.0), ior), (0.0, 0.0, 0.0))
+    t = 1.0 - _fresnel_dielectric(b, mu, ior)
+    b.diffuse(b.scale(b.input("Grain Albedo", "color"), grains * t * t))
+
+
+def _roughness_factor(b, tau0, log_pores):
+    """sqrt(−τ0 / ln(1 − τ0)) of Eq. 18; its series 1 − τ0/4 below τ0 = 1e-3 (0/0 at τ0 = 0)."""
+    small = b.step_below(tau0, 1e-3)
+    exact = b.sqrt(tau0 / (small - log_pores))  # + small keeps the unused branch finite
+    return exact * (1.0 - small) + (1.0 - 0.25 * tau0) * small
+
+
+def _fresnel_dielectric(b, c, eta):
+    """Unpolarised Fresnel reflectance at cos θ = c from outside a dielectric of relative IOR η ≥ 1."""
+    g = b.sqrt(eta * eta - 1.0 + c * c)
+    a = (g - c) / (g + c)
+    d = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    return 0.5 * a * a * (1.0 + d * d)
+
+
+def _gaf_ratio(b, mu, tau0, log_pores, beta, alpha):
+    """G_micrograin / G_GGX(α̃) at the mirror configuration: (1 + 2 Λ_GGX(θo)) / (1 + 2 Λ(θo))."""
+    tan2 = (1.0 - mu * mu) / (mu * mu)
+    lambda_ggx = 0.5 * (b.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
+    return (1.0 + 2.0 * lambda_ggx) / (1.0 + 2.0 * _micrograin_lambda(b, mu, tau0, log_pores, beta))
+
+
+def _micrograin_lambda(b, mu, tau0, log_pores, beta):
+    tan2 = (1.0 - mu * mu) / (mu * mu)  # TEMPORARY: GGX(α̃) until the float32-safe series lands
+    alpha = beta * _roughness_factor(b, tau0, log_pores)
+    return 0.5 * (b.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
+
