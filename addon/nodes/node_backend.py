@@ -261,7 +261,8 @@ class NodeBackend:
             self.links.new(metal.outputs[0], mix.inputs[2])
             self._add(mix.outputs[0], depth + 1)
         else:
-            f0 = ((eta - 1.0) * (eta - 1.0) + k * k) / ((eta + 1.0) * (eta + 1.0) + k * k)
+            k2 = k * k if isinstance(k, NodeValue) else tuple(float(x) * float(x) for x in k)
+            f0 = ((eta - 1.0) * (eta - 1.0) + k2) / ((eta + 1.0) * (eta + 1.0) + k2)
             self._closure("ShaderNodeBsdfPrincipled", {"Base Color": f0 * color, "Metallic": 1.0,
                                                        "Roughness": self._roughness(alpha)}, distribution="GGX")
 
