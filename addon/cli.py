@@ -70,6 +70,18 @@ def build_parser() -> argparse.ArgumentParser:
     bk.add_argument("--out", help="the .blend to write (refused if it exists, see --overwrite)")
     bk.add_argument("--overwrite", action="store_true",
                     help="replace an existing --out; without --out, save over --blend")
+
+    ad = sub.add_parser("add-porous", help="add a micrograin porous layer (dust, rust, ...) over a material of a "
+                                           ".blend: a new material, assigned wherever the original was used")
+    ad.add_argument("--blend", required=True, help="the .blend to open")
+    ad.add_argument("--material", required=True, help="the material to cover (it is kept, with a fake user)")
+    g = ad.add_mutually_exclusive_group(required=True)
+    g.add_argument("--preset", help="a micrograin preset (list-presets --model micrograin); its bulk is ignored")
+    g.add_argument("--json", help="a JSON file with a micrograin dict (its bulk is ignored)")
+    ad.add_argument("--form", default="nodes", choices=FORMS)
+    ad.add_argument("--out", help="the .blend to write (refused if it exists, see --overwrite)")
+    ad.add_argument("--overwrite", action="store_true",
+                    help="replace an existing --out; without --out, save over --blend")
     return ap
 
 
@@ -228,9 +240,62 @@ def cmd_bake(args) -> int:
     print(f"lamina: {summary}; wrote {out}")
     return 0
 
+
+def _porous_dict(args) -> tuple[dict, list[str]]:
+    """The layer's micrograin dict from --preset or --json, checked (warnings printed) before the .blend is
+    opened; returns it and the warnings."""
+    from .models import micrograin
+
+    if args.json:
+        try:
+            with open(args.json) as f:
+                data = json.load(f)
+        except (OSError, json.JSONDecodeError) as e:
+            raise CliError(f"cannot read --json {args.json}: {e}") from None
+    else:
+        try:
+            data = presets.load(micrograin.ID, args.preset)
+        except KeyError as e:
+            raise CliError(str(e.args[0])) from None
+    if not isinstance(data, dict):
+        raise CliError(f"--json {args.json}: expected a JSON object (a micrograin dict)")
+    data = {k: v for k, v in data.items() if k != "bulk"}  # the bulk is the material's own shader
+    try:
+        validated = micrograin.validate({**data, "bulk": {"type": micrograin.WRAPPED}})
+    except ParamError as e:
+        raise CliError(str(e)) from None
+    for w in validated.warnings:
+        print(f"lamina: warning: {w}", file=sys.stderr)
+    return data, validated.warnings
+
+
+def cmd_add_porous(args) -> int:
+    blend = os.path.abspath(args.blend)
+    if not os.path.isfile(blend):
+        raise CliError(f"{blend} does not exist")
+    if args.out is None and not args.overwrite:
+        raise CliError("pass --out FILE, or --overwrite to save over --blend")
+    out = os.path.abspath(args.out or args.blend)
+    if os.path.exists(out) and not args.overwrite:
+        raise CliError(f"{out} exists; pass --overwrite to replace it")
+    data, printed = _porous_dict(args)
+    from .operators import material_ops
+
+    try:
+        summary, warnings = material_ops.add_porous_file(blend, args.material, data, args.form, out, args.preset)
+    except material_ops.PorousError as e:  # the file's content: nothing was written
+        print(f"lamina: error: {e}", file=sys.stderr)
+        return 1
+    for w in warnings:
+        if w not in printed:
+            print(f"lamina: warning: {w}", file=sys.stderr)
+    print(f"lamina: {summary}; wrote {out}")
+    return 0
+
+
 COMMANDS = {"list-presets": cmd_list_presets, "make-material": cmd_make_material, "compare": cmd_compare,
             "demo": cmd_demo, "bench": cmd_bench,
-            "bake": cmd_bake}
+            "bake": cmd_bake, "add-porous": cmd_add_porous}
 
 
 def main(argv=None) -> int:

@@ -186,6 +186,27 @@ def set_multiple_scattering(mat, on: bool) -> None:
     _rebuild(mat, model_id, p, form_of(mat))
 
 
+def insert_layer(mat, model_id: str, p, form: str, surface) -> None:
+    """Put a new Lamina node for the porous layer ``p`` between a Material Output and the shader linked into its
+    ``surface`` input: that shader feeds the node's Bulk input, the node the output, which moves right to make
+    room. The node is built first (nothing is touched if that fails). When ``p`` has a reference bulk, the shader
+    that fed the output must be the node ``Lamina Bulk`` (another Lamina material's node, renamed): it is rebuilt in
+    ``form`` like ``set_form`` does. Records the parameters like ``_rebuild``. The material must have no node named
+    ``Lamina``."""
+    tree = mat.node_tree
+    node = _new_node(mat, model_id, p, form)
+    out = surface.node
+    node.parent = out.parent
+    node.location = out.location
+    out.location = (out.location.x + node.width + 60.0, out.location.y)
+    tree.links.new(surface.links[0].from_socket, node.inputs[BULK_INPUT])
+    tree.links.new(node.outputs["BSDF"], surface)
+    _replace(mat, None, node)
+    _build_bulk(mat, model_id, p, form)
+    mat["lamina"] = json.dumps({"model": model_id, "params": p.to_dict()})
+    bake_constants(mat)
+
+
 def _rebuild(mat, model_id: str, p, form: str) -> None:
     """Build the tree first (nothing is touched if that fails), then record the parameters and the bake."""
     _build_tree(mat, model_id, p, form)

@@ -7,6 +7,7 @@ classes = (
     compare_op.LaminaCompareSettings,
     material_ops.LAMINA_OT_add_spongecake,
     material_ops.LAMINA_OT_set_form,
+    material_ops.LAMINA_OT_add_porous_layer,
     ms_ops.LAMINA_OT_set_multiple_scattering,
     ms_ops.LAMINA_OT_rebake,
     compare_op.LAMINA_OT_compare,

@@ -2,12 +2,16 @@
 instead of editing the user's: an existing material is never modified, only a slot's link may change."""
 from __future__ import annotations
 
+import os
+
 import bpy
 
 from .. import presets
+from ..models import micrograin
 from ..models import spongecake as model
 from ..models.params import ParamError
 from ..nodes import material as lamina_material
+from ..nodes import wrap
 
 SCRATCH = "SCRATCH"
 LAYER_ITEMS = [(t, t.capitalize() if t != "hg" else "Henyey-Greenstein", "") for t in model.LAYER_TYPES]
@@ -133,3 +137,215 @@ class LAMINA_OT_set_form(bpy.types.Operator):
         if self.form == "osl" and not context.scene.cycles.shading_system:
             self.report({"WARNING"}, "Enable Render Properties > Open Shading Language to render the OSL form")
         return {"FINISHED"}
+
+
+# ------------------------------------------------------------------------------------------ porous layer
+
+CUSTOM = "CUSTOM"
+POROUS_PRESET_ITEMS = [(CUSTOM, "Custom", "Set the filling factor and the grains below")] + [
+    (n, wrap.label(n), presets.description(micrograin.ID, n)) for n in presets.names(micrograin.ID)]
+ROUGHNESS_ITEMS = [
+    ("anfractuosity", "Anfractuosity β", "Set the grains' shape: height over radius (the paper's beta)"),
+    ("roughness", "Equivalent roughness α",
+     "Set the GGX roughness the grains look like (α̃ of Eq. 18); Lamina derives the anfractuosity at this filling "
+     "factor, so the highlight keeps its sharpness when the filling factor changes"),
+]
+GRAIN_ITEMS = [
+    ("diffuse", "Diffuse", "Matte (Lambertian) grains: dust, dirt, mud"),
+    ("dielectric", "Diffuse + specular", "Matte grains under a specular dielectric coat: glossy dust, paint"),
+    ("conductor", "Conductor", "Specular grains with a complex IOR: rust, metallic spray paint, soot"),
+]
+GRAIN_LABELS = {key: label for key, label, _ in GRAIN_ITEMS}
+CONDUCTOR_ITEMS = [(k, k.replace("_", " ").capitalize(), f"Grains of {k.replace('_', ' ')} (complex IOR, RGB)")
+                   for k in micrograin.CONDUCTORS] + [(CUSTOM, "Custom", "Set the complex IOR (n, k) below")]
+_GOLD = micrograin.CONDUCTORS["gold"]
+
+
+def _micrograin_desc(name: str) -> str:
+    return next(p.description for p in micrograin.LAYER if p.name == name)
+
+
+class LAMINA_OT_add_porous_layer(bpy.types.Operator):
+    """Add a micrograin porous layer (dust, rust, dirt, spray paint) over the active material: a new material
+    wrapping a copy of it (the original is never changed)"""
+
+    bl_idname = "lamina.add_porous_layer"
+    bl_label = "Add Porous Layer"
+    bl_options = {"REGISTER", "UNDO"}
+
+    preset: bpy.props.EnumProperty(name="Preset", items=POROUS_PRESET_ITEMS, default=CUSTOM,
+                                   description="A porous layer after the paper's Fig. 1, or Custom (the "
+                                               "preset's bulk is ignored: the bulk is your material)")
+    filling_factor: bpy.props.FloatProperty(name="Filling Factor", default=0.3, min=0.0, max=micrograin.MAX_FILLING,
+                                            subtype="FACTOR", description=_micrograin_desc("filling_factor"))
+    roughness_control: bpy.props.EnumProperty(name="Roughness", items=ROUGHNESS_ITEMS, default="anfractuosity",
+                                              description="Set the grains' shape or the roughness they look like")
+    anfractuosity: bpy.props.FloatProperty(name="Anfractuosity", default=0.5, min=micrograin.MIN_ANFRACTUOSITY,
+                                           max=1.0, subtype="FACTOR", description=_micrograin_desc("anfractuosity"))
+    roughness: bpy.props.FloatProperty(
+        name="Equivalent Roughness", default=0.4, min=0.0, max=1.0, subtype="FACTOR",
+        description="GGX roughness alpha of the grains' highlight (Eq. 18: anfractuosity x "
+                    "sqrt(-tau0 / ln(1 - tau0))); capped where the anfractuosity reaches 1")
+    grain_type: bpy.props.EnumProperty(name="Grains", items=GRAIN_ITEMS, default="diffuse",
+                                       description="The grains' micro-BRDF")
+    grain_color: bpy.props.FloatVectorProperty(name="Grain Albedo", subtype="COLOR", size=3, min=0.0, max=1.0,
+                                               default=(0.70, 0.68, 0.64),
+                                               description="Albedo of the grains' matte part (linear)")
+    grain_ior: bpy.props.FloatProperty(name="Grain IOR", default=1.5, min=1.0, max=3.0,
+                                       description="Index of refraction of the grains' specular coat")
+    conductor: bpy.props.EnumProperty(name="Conductor", items=CONDUCTOR_ITEMS, default="gold",
+                                      description="What the conductor grains are made of")
+    conductor_ior: bpy.props.FloatVectorProperty(name="IOR n", size=3, min=0.01, max=10.0, default=_GOLD[0],
+                                                 description="Real part of the grains' complex IOR (R, G, B)")
+    conductor_k: bpy.props.FloatVectorProperty(name="Extinction k", size=3, min=0.0, max=20.0, default=_GOLD[1],
+                                               description="Imaginary part of the grains' complex IOR (R, G, B)")
+    form: bpy.props.EnumProperty(name="Form", items=FORM_ITEMS, default="nodes")
+    assign_to_slot: bpy.props.BoolProperty(
+        name="Assign to slot", default=True,
+        description="Put the new material in the active slot instead of the original (which stays in the file, "
+                    "with a fake user if nothing else uses it)")
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        mat = getattr(obj, "active_material", None)
+        if mat is None:
+            cls.poll_message_set("The active object has no active material")
+            return False
+        if lamina_material.is_lamina(mat) and lamina_material.info(mat).get("model") == micrograin.ID:
+            cls.poll_message_set("Already has a porous layer: edit its Filling Factor on the Lamina node")
+            return False
+        return True
+
+    def invoke(self, context, event):
+        return context.window_manager.invoke_props_dialog(self, width=360)
+
+    def draw(self, context):
+        layout = self.layout
+        layout.prop(self, "preset")
+        if self.preset != CUSTOM:  # the preset's values (not editable here: on the Lamina node afterwards)
+            p = micrograin.params_from_dict({**self.layer_dict(), "bulk": {"type": micrograin.WRAPPED}})
+            col = layout.column(align=True)
+            col.label(text=presets.description(micrograin.ID, self.preset), icon="INFO")
+            col.label(text=f"Grains: {GRAIN_LABELS[p.grain.type].lower()}; filling factor {p.filling_factor:.2f}; "
+                           f"anfractuosity β {p.anfractuosity:.2f} (α {p.roughness:.3f})")
+            col.label(text="Your material is the bulk; edit the values on the Lamina node afterwards")
+        else:
+            self._draw_custom(layout.column())
+        layout.row().prop(self, "form", expand=True)
+        layout.prop(self, "assign_to_slot")
+
+    def _draw_custom(self, col) -> None:
+        col.prop(self, "filling_factor", slider=True)
+        col.row().prop(self, "roughness_control", expand=True)
+        col.prop(self, self.roughness_control, slider=True)
+        col.label(text=self._other_control())
+        col.prop(self, "grain_type")
+        if self.grain_type != "conductor":
+            col.prop(self, "grain_color")
+        if self.grain_type == "dielectric":
+            col.prop(self, "grain_ior")
+        if self.grain_type == "conductor":
+            col.prop(self, "conductor")
+            if self.conductor == CUSTOM:
+                col.prop(self, "conductor_ior")
+                col.prop(self, "conductor_k")
+
+    def _other_control(self) -> str:
+        """The value the chosen roughness control implies for the other one (Eq. 18)."""
+        tau0 = self.filling_factor
+        if self.roughness_control == "anfractuosity":
+            return f"Equivalent roughness α = {micrograin.equivalent_roughness(tau0, self.anfractuosity):.3f}"
+        beta = micrograin.anfractuosity_for(tau0, self.roughness)
+        if beta > 1.0:
+            return f"Anfractuosity β = 1 (largest α here: {micrograin.equivalent_roughness(tau0, 1.0):.3f})"
+        return f"Anfractuosity β = {max(beta, micrograin.MIN_ANFRACTUOSITY):.3f}"
+
+    def layer_dict(self) -> dict:
+        """The micrograin dict the dialog describes (a preset's, or the Custom settings); no bulk."""
+        if self.preset != CUSTOM:
+            return presets.load(micrograin.ID, self.preset)
+        data = {"filling_factor": self.filling_factor}
+        if self.roughness_control == "anfractuosity":
+            data["anfractuosity"] = self.anfractuosity
+        else:
+            data["roughness"] = self.roughness
+        grain = {"type": self.grain_type}
+        if self.grain_type != "conductor":
+            grain["albedo"] = list(self.grain_color)
+        if self.grain_type == "dielectric":
+            grain["ior"] = self.grain_ior
+        if self.grain_type == "conductor":
+            ior, k = ((self.conductor_ior, self.conductor_k) if self.conductor == CUSTOM
+                      else micrograin.CONDUCTORS[self.conductor])
+            grain["ior"], grain["k"] = list(ior), list(k)
+        data["grain"] = grain
+        return data
+
+    def execute(self, context):
+        obj = context.active_object
+        source = getattr(obj, "active_material", None)
+        if source is None:
+            self.report({"ERROR"}, "The active object has no active material to add a porous layer to")
+            return {"CANCELLED"}
+        warnings = []
+        name = f"{source.name} + {wrap.label(None if self.preset == CUSTOM else self.preset)}"
+        try:
+            mat = wrap.add_porous_layer(source, self.layer_dict(), self.form, name=name, warnings=warnings)
+        except ParamError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        except Exception as e:  # noqa: BLE001 - e.g. OSL compile failure: report; nothing was created
+            self.report({"ERROR"}, f"Could not add a porous layer to {source.name}: {e}")
+            return {"CANCELLED"}
+        for w in warnings:
+            self.report({"WARNING"}, w)
+        if self.assign_to_slot:
+            assign_to_active_slot(obj, mat)
+            if wrap.keep(source):
+                self.report({"INFO"}, f"{source.name} is no longer used: kept with a fake user so saving keeps it")
+        elif wrap.keep(mat):
+            self.report({"INFO"}, f"{mat.name} is not assigned: kept with a fake user (pick it in a slot)")
+        if self.form == "osl" and not context.scene.cycles.shading_system:
+            self.report({"WARNING"}, "OSL form: enable Render Properties > Open Shading Language (CPU or OptiX) "
+                                     "to see it; Lamina does not change scene settings")
+        self.report({"INFO"}, f"Added material {mat.name} (a porous layer over {source.name})")
+        return {"FINISHED"}
+
+
+class PorousError(Exception):
+    """The file cannot get the porous layer: unknown material, nothing to wrap, already a porous layer, not saved."""
+
+
+def add_porous_file(blend: str, material: str, data: dict, form: str, out: str,
+                    preset: str | None = None) -> tuple[str, list[str]]:
+    """Open ``blend``, add a porous layer over ``material`` (a new material, assigned to every object slot that
+    used the original; the original stays in the file with a fake user) and save the file as ``out`` atomically.
+    Returns a one-line summary and the warnings. Nothing is saved when it is refused (PorousError)."""
+    from ..bake.exr import atomic_path
+
+    bpy.ops.wm.open_mainfile(filepath=blend)
+    source = bpy.data.materials.get(material)
+    if source is None:
+        names = ", ".join(sorted(m.name for m in bpy.data.materials)) or "none"
+        raise PorousError(f"no material {material!r} in {blend} (it has: {names})")
+    warnings = []
+    try:
+        mat = wrap.add_porous_layer(source, data, form, name=f"{source.name} + {wrap.label(preset)}",
+                                    warnings=warnings)
+    except ParamError as e:
+        raise PorousError(str(e)) from None
+    slots = wrap.replace_everywhere(source, mat)
+    source.use_fake_user = True
+    if slots == 0:
+        wrap.keep(mat)
+        warnings.append(f"no object uses {source.name}: {mat.name} is in the file with a fake user, assigned nowhere")
+    if form == "osl" and not any(s.cycles.shading_system for s in bpy.data.scenes):
+        warnings.append("the OSL form renders only with Render Properties > Open Shading Language on (CPU or "
+                        "OptiX); Lamina does not change scene settings")
+    with atomic_path(out) as tmp:
+        os.remove(tmp)  # Blender would keep a .blend1 backup of the file it saves over
+        if "FINISHED" not in bpy.ops.wm.save_as_mainfile(filepath=tmp, copy=True):
+            raise PorousError(f"could not save {out}")
+    return (f"added {mat.name!r} over {source.name!r} in {slots} object slot(s), {source.name!r} kept with a fake "
+            f"user"), warnings

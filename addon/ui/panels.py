@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import bpy
 
-from ..models import MODELS
+from ..models import MODELS, micrograin
 from ..nodes import material as lamina_material
 
 
@@ -20,15 +20,22 @@ class LAMINA_PT_main(bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        layout.operator("lamina.add_spongecake", icon="MATERIAL")
         mat = getattr(context, "material", None)
+        col = layout.column(align=True)
+        col.operator("lamina.add_spongecake", icon="MATERIAL")
+        row = col.row(align=True)
+        row.enabled = mat is not None and not _is_micrograin(mat)  # what the operator's poll says, but visible
+        row.operator("lamina.add_porous_layer", icon="MOD_PARTICLES")
         if not lamina_material.is_lamina(mat):
             layout.label(text="The active material is not a Lamina material", icon="INFO")
             return
         box = layout.box()
         info = lamina_material.info(mat)
         form = lamina_material.form_of(mat)
-        box.label(text=f"{mat.name}: {info['model']}, {len(info['params']['layers'])} layer(s)")
+        if info["model"] == micrograin.ID:
+            _draw_micrograin(box, mat)
+        else:
+            box.label(text=f"{mat.name}: {info['model']}, {len(info['params']['layers'])} layer(s)")
         row = box.row(align=True)
         for value, label in (("nodes", "Node group"), ("osl", "OSL")):
             op = row.operator("lamina.set_form", text=label, depress=(form == value))
@@ -36,8 +43,53 @@ class LAMINA_PT_main(bpy.types.Panel):
         scene = context.scene
         if form == "osl" and not (scene.render.engine == "CYCLES" and scene.cycles.shading_system):
             box.label(text="OSL renders only in Cycles with Open Shading Language on", icon="ERROR")
+        if info["model"] == micrograin.ID:
+            box.label(text="Edit the filling factor and grains on the Lamina node", icon="NODE")
+            return
         box.label(text="Edit the layer parameters on the Lamina node", icon="NODE")
-        _draw_multiple_scattering(layout.box(), context, mat)
+        if hasattr(MODELS[info["model"]], "MS_MAX_LAYERS"):
+            _draw_multiple_scattering(layout.box(), context, mat)
+
+
+def _is_micrograin(mat) -> bool:
+    return lamina_material.is_lamina(mat) and lamina_material.info(mat).get("model") == micrograin.ID
+
+
+GRAIN_LABELS = {"diffuse": "diffuse", "dielectric": "diffuse + specular dielectric", "conductor": "conductor"}
+
+
+def _linked(node, name: str) -> bool:
+    socket = node.inputs.get(name) or node.inputs.get(name.replace(" ", "_"))  # node group / OSL names
+    return socket is not None and socket.is_linked
+
+
+def _draw_micrograin(box, mat) -> None:
+    """A porous layer's summary from the Lamina node's current inputs: grains, filling factor, α̃ (Eq. 18), bulk."""
+    box.label(text=f"{mat.name}: micrograin porous layer")
+    try:
+        _, p = lamina_material.current_params(mat)
+    except Exception as e:  # noqa: BLE001 - a hand-edited node tree: say so instead of failing to draw
+        box.label(text=f"Cannot read the Lamina node: {e}", icon="ERROR")
+        return
+    node = lamina_material.shader_node(mat)
+    if node is None:
+        box.label(text="The Lamina node was removed: showing the stored values", icon="ERROR")
+    col = box.column(align=True)
+    grain = GRAIN_LABELS[p.grain.type]
+    if p.grain.type == "dielectric":
+        grain += f" (IOR {p.grain.ior:.2f})"
+    col.label(text=f"Grains: {grain}")
+    textured = node is not None and _linked(node, "Filling Factor")
+    col.label(text="Filling factor: texture-driven" if textured else f"Filling factor: {p.filling_factor:.2f}")
+    if node is not None and (textured or _linked(node, "Anfractuosity")):
+        col.label(text="Equivalent roughness: varies (texture-driven inputs)")
+    else:
+        col.label(text=f"Equivalent roughness α: {p.roughness:.3f} (anfractuosity {p.anfractuosity:.2f})")
+    if p.bulk.type == micrograin.WRAPPED:
+        col.label(text="Bulk: the material's own shader (Bulk input)")
+    else:
+        bulk = getattr(MODELS.get(p.bulk.type), "LABEL", p.bulk.type)
+        col.label(text=f"Bulk: {bulk} (node {lamina_material.BULK_NODE})")
 
 
 def _draw_multiple_scattering(box, context, mat) -> None:
@@ -81,15 +133,25 @@ class LAMINA_PT_compare(bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         settings = context.window_manager.lamina_compare
+        mat = context.material
+        info = lamina_material.info(mat)
+        wrapped = info["model"] == micrograin.ID and info["params"].get("bulk", {}).get("type") == micrograin.WRAPPED
+        if wrapped:
+            layout.label(text="Comparison needs a reference bulk: this porous", icon="INFO")
+            layout.label(text="layer wraps the material's own shader")
         col = layout.column(align=True)
+        col.enabled = not wrapped
         col.prop(settings, "samples")
         col.prop(settings, "resolution")
         col.prop(settings, "scene")
-        col.prop(settings, "multiple_scattering")
-        if settings.multiple_scattering:
-            col.prop(settings, "ms_paths")
-            col.prop(settings, "ms_stride")
-        layout.operator("lamina.compare", icon="IMAGE_REFERENCE")
+        if hasattr(MODELS.get(info["model"]), "MS_MAX_LAYERS"):
+            col.prop(settings, "multiple_scattering")
+            if settings.multiple_scattering:
+                col.prop(settings, "ms_paths")
+                col.prop(settings, "ms_stride")
+        row = layout.row()
+        row.enabled = not wrapped
+        row.operator("lamina.compare", icon="IMAGE_REFERENCE")
         for line in settings.last_report.splitlines():
             layout.label(text=line)
 
