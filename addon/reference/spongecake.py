@@ -146,7 +146,7 @@ def _stack_transmittance(params: Params, w):
     return np.where(_above(w), np.exp(-_optical_depths(params, w).sum(axis=0)), 1.0)
 
 
-def _substrate_bsdf(sub: Substrate, wi, wo):
+def substrate_bsdf(sub: Substrate, wi, wo):
     """The bare substrate BSDF (N, 3), no cosine."""
     if sub.type == "diffuse":
         both_above = (wi[:, 2] > 0) & (wo[:, 2] > 0)
@@ -156,8 +156,8 @@ def _substrate_bsdf(sub: Substrate, wi, wo):
     return microfacet.dielectric_eval(wi, wo, sub.roughness, sub.ior)[:, None] * np.ones(3)
 
 
-def _substrate_pdf(sub: Substrate, wi, wo):
-    """Density of ``_substrate_sample``: cosine on wi's side, or GGX visible normals (mirrored when wi is below)."""
+def substrate_pdf(sub: Substrate, wi, wo):
+    """Density of ``substrate_sample``: cosine on wi's side, or GGX visible normals (mirrored when wi is below)."""
     if sub.type == "dielectric":
         return microfacet.dielectric_pdf(wi, wo, sub.roughness, sub.ior)
     side = np.where(_above(wi), 1.0, -1.0)
@@ -166,7 +166,7 @@ def _substrate_pdf(sub: Substrate, wi, wo):
     return microfacet.reflection_pdf(side[:, None] * wi, side[:, None] * wo, sub.roughness)
 
 
-def _substrate_sample(sub: Substrate, wi, u0, u1, u2):
+def substrate_sample(sub: Substrate, wi, u0, u1, u2):
     """Cosine-weighted directions (diffuse), reflected GGX visible normals (conductor), Walter 2007 (dielectric)."""
     if sub.type == "dielectric":
         return microfacet.dielectric_sample(wi, sub.roughness, sub.ior, u0, u1, u2)
@@ -181,7 +181,7 @@ def _substrate_eval(params: Params, wi, wo):
     if params.substrate is None:
         return np.zeros((len(wi), 3))
     att = _stack_transmittance(params, wi) * _stack_transmittance(params, wo)
-    return _substrate_bsdf(params.substrate, wi, wo) * att[:, None]
+    return substrate_bsdf(params.substrate, wi, wo) * att[:, None]
 
 
 # ---------------------------------------------------------------------------------------------- public
@@ -228,7 +228,7 @@ def _lobe_pdfs(params: Params, wi, wo):
     """(N, continuous lobes) densities of each continuous lobe's sampler."""
     columns = [_phase_pdf(layer, wi, wo) for layer in params.layers]
     if params.substrate is not None:
-        columns.append(_substrate_pdf(params.substrate, wi, wo))
+        columns.append(substrate_pdf(params.substrate, wi, wo))
     return np.stack(columns, axis=1)
 
 
@@ -255,7 +255,7 @@ def sample(params: Params, wi, u) -> Sample:
         wo[m] = _phase_sample(layer, wi[m], u[m, 1], u[m, 2])[0]
     if params.substrate is not None:
         m = lobe == len(params.layers)
-        wo[m] = _substrate_sample(params.substrate, wi[m], u0[m], u[m, 1], u[m, 2])
+        wo[m] = substrate_sample(params.substrate, wi[m], u0[m], u[m, 1], u[m, 2])
     is_delta = lobe == len(params.layers) if params.substrate is None else np.zeros(len(wi), bool)
     density = np.where(is_delta, chosen, pdf(params, wi, wo))
     value = np.where(is_delta[:, None], delta_transmittance(params, wi), eval(params, wi, wo) * np.abs(wo[:, 2:]))
@@ -376,7 +376,7 @@ def _vertex_to(params: Params, z, wi, layer, surface, wo, kappa_o):
             value[m] = np.asarray(lay.albedo) * _phase_value(lay, wi[m], wo[m]) / np.abs(wo[m, 2:])
     if params.substrate is not None:
         value[~surface & ~up] = 0.0  # the substrate blocks transmission out of the stack
-        value[surface] = _substrate_bsdf(params.substrate, wi[surface], wo[surface])
+        value[surface] = substrate_bsdf(params.substrate, wi[surface], wo[surface])
     return value * transmittance[:, None]
 
 
@@ -391,9 +391,9 @@ def _scatter(params: Params, state, rng):
         beta[m] *= np.asarray(lay.albedo) * fresnel
     if params.substrate is not None and surface.any():
         sub, wi = params.substrate, -d[surface]
-        x = _substrate_sample(sub, wi, u[surface, 0], u[surface, 1], u[surface, 2])
-        density = _substrate_pdf(sub, wi, x)
-        f = _substrate_bsdf(sub, wi, x) * np.abs(x[:, 2:])
+        x = substrate_sample(sub, wi, u[surface, 0], u[surface, 1], u[surface, 2])
+        density = substrate_pdf(sub, wi, x)
+        f = substrate_bsdf(sub, wi, x) * np.abs(x[:, 2:])
         beta[surface] *= np.divide(f, density[:, None], out=np.zeros_like(f), where=density[:, None] > 0)
         beta[surface] *= (x[:, 2:] > 0)  # light refracted or scattered into the substrate leaves the stack
         d_new[surface] = x
