@@ -5,7 +5,7 @@ the grains' BRDF f_S and the bulk's f_B with the weight w⁺(i, o) of Eq. 24, wh
 1 − w⁺ = g(θi) g(θo), g = sqrt(1 − τβ) (research notes §3). A closure weight cannot depend on the light, so
 g(θi) is taken at the mirror configuration θi = θo: the bulk gets 1 − τβ(θo) and the grains τβ(θo), exact at
 the specular configuration. [approx: view-only-weight] The bulk's transmission (glass) gets that weight too,
-where light really passes through the pores it sees, 1 − τ⁺(θo) (Eq. 22). [approx: bulk-transmission-weight]
+where the reference has g(θo) ḡ (ḡ the hemispherical mean of g; ``reference.micrograin``). [approx: bulk-transmission-weight]
 
 The grains' specular lobe is Cycles' GGX with the equivalent roughness α̃ of Eq. 18, whose D equals the
 micrograin D (Eq. 17) at h = n, i.e. at every mirror configuration. [approx: grains-as-ggx] With the
@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from ..models import micrograin as model
 from ..models.params import Param
+from ..reference.micrograin import lambda_scheme
 from .expr import BULK_INPUT
 from .spongecake import Socket
 
@@ -33,7 +34,7 @@ def _one(**kw) -> dict:
 APPROXIMATIONS = {
     "view-only-weight": ("w⁺(i, o) taken at the mirror configuration θi = θo (τβ of the view only)",
                          _one(filling_factor=0.5, anfractuosity=1.0)),
-    "bulk-transmission-weight": ("the bulk's transmission weighted 1 − τβ(θo) instead of 1 − τ⁺(θo)",
+    "bulk-transmission-weight": ("the bulk's transmission weighted g(θo)² = 1 − τβ(θo) instead of g(θo) ḡ",
                                  _one(filling_factor=0.3, bulk={"type": "dielectric", "roughness": 0.1,
                                                                 "ior": 1.5},
                                       grain={"type": "conductor", "ior": [1.5] * 3, "k": [0.0] * 3})),
@@ -113,7 +114,7 @@ def shade(b, p: model.Params) -> None:
     if p.grain.type == "diffuse":
         b.diffuse(b.scale(b.input("Grain Albedo", "color"), grains))
         return
-    specular = grains if p.gaf == "ggx" else grains * _gaf_ratio(b, mu, tau0, log_pores, beta, alpha)
+    specular = grains if p.gaf == "ggx" else grains * _gaf_ratio(b, mu, tau0, beta, alpha)
     if p.grain.type == "conductor":
         b.conductor(b.scale((1.0, 1.0, 1.0), specular), alpha, b.input("Grain IOR", "color"),
                     b.input("Grain Extinction", "color"))
@@ -139,15 +140,14 @@ def _fresnel_dielectric(b, c, eta):
     return 0.5 * a * a * (1.0 + d * d)
 
 
-def _gaf_ratio(b, mu, tau0, log_pores, beta, alpha):
+def _gaf_ratio(b, mu, tau0, beta, alpha):
     """G_micrograin / G_GGX(α̃) at the mirror configuration: (1 + 2 Λ_GGX(θo)) / (1 + 2 Λ(θo))."""
     tan2 = (1.0 - mu * mu) / (mu * mu)
     lambda_ggx = 0.5 * (b.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
-    return (1.0 + 2.0 * lambda_ggx) / (1.0 + 2.0 * _micrograin_lambda(b, mu, tau0, log_pores, beta))
+    return (1.0 + 2.0 * lambda_ggx) / (1.0 + 2.0 * _micrograin_lambda(b, mu, tau0, beta))
 
 
-def _micrograin_lambda(b, mu, tau0, log_pores, beta):
-    tan2 = (1.0 - mu * mu) / (mu * mu)  # TEMPORARY: GGX(α̃) until the float32-safe series lands
-    alpha = beta * _roughness_factor(b, tau0, log_pores)
-    return 0.5 * (b.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
-
+def _micrograin_lambda(b, mu, tau0, beta):
+    """Λ of the micrograin NDF at cos θ = μ in float32 without cancellation (``reference.micrograin.
+    smith_lambda_float32``: within 1.1e-4 of the exact Λ for θ ≤ 89°, never negative)."""
+    return lambda_scheme(b, mu, tau0, beta)

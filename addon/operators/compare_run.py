@@ -56,11 +56,14 @@ def reference_functions(model_id: str, p):
 
 
 def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_dir: str, progress=None,
-                     reference_cache: dict | None = None, ms: ms_truth.TruthSettings | None = None) -> dict:
+                     reference_cache: dict | None = None, ms: ms_truth.TruthSettings | None = None,
+                     blends: bool = False) -> dict:
     """Cycles vs reference for an existing Lamina material (it is assigned to temporary objects, never edited).
     ``scenes``: names of standard scenes (at ``resolution``) or ``Scene`` objects.
     ``reference_cache`` lets several forms of the same parameters share the reference renders (and, with ``ms``,
     the single-scattering images and the Monte Carlo ground truth).
+    ``blends``: also render the reference with the model's other blending weights (micrograin: the linear mix by
+    τ0 of the paper's Fig. 14 and d'Eon et al.'s weighting, Eq. 26) beside ours (``blend_comparison``).
     ``ms``: compare with multiple scattering (module docstring). A material whose flag is off is compared
     through a temporary copy with the flag on, removed again afterwards."""
     model_id, p = lamina_material.current_params(mat)
@@ -70,7 +73,8 @@ def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_
         try:
             tmp = lamina_material.new_material(model_id, p_on, lamina_material.form_of(mat),
                                                name=f"{mat.name} (multiple scattering)")
-            return compare_material(tmp, scenes, samples, resolution, seed, out_dir, progress, reference_cache, ms)
+            return compare_material(tmp, scenes, samples, resolution, seed, out_dir, progress, reference_cache, ms,
+                                    blends)
         finally:
             blend_io.remove_new_data(before)
     bsdf_eval, bsdf_albedo = reference_functions(model_id, p)
@@ -86,7 +90,35 @@ def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_
         if ms is not None:
             cycles = read_exr(report[spec.name]["files"]["cycles"], "RGB")
             report[spec.name]["ms"] = ms_comparison(model_id, p, spec, cycles, reference, ms, out_dir, cache)
+        if blends:
+            cycles = read_exr(report[spec.name]["files"]["cycles"], "RGB")
+            report[spec.name]["blends"] = blend_comparison(model_id, p, spec, cycles, reference, out_dir, cache)
     return report
+
+
+def blend_comparison(model_id: str, p, spec, cycles, reference, out_dir: str, cache: dict) -> dict:
+    """The reference with each of the model's other blending weights (``reference.<model>.BLENDS[1:]``) against
+    ours: their relative RMSE from ours, and ``<scene>_blends.png`` = Cycles | ours | each other blend, one
+    exposure."""
+    ref = reference_module(model_id)
+    if not hasattr(ref, "BLENDS"):
+        raise ValueError(f"{model_id} has a single blending weight")
+    mask = ref_scenes.scene_mask(spec)
+    images, out = [cycles, reference], {}
+    for blend in ref.BLENDS[1:]:
+        key = f"{spec.name}/blend {blend}"
+        if key not in cache:
+            cache[key] = ref_scenes.reference_image(
+                spec, lambda wi, wo, _b=blend: ref.eval(p, wi, wo, blend=_b),
+                bsdf_albedo=lambda wo, _b=blend: ref.furnace_albedo(p, wo, n=ALBEDO_SAMPLES, blend=_b))
+        images.append(cache[key])
+        out[blend] = metrics.rel_rmse(cache[key], reference, mask)
+    exposure = metrics.auto_exposure(reference, mask)
+    panels = [metrics.tonemap(x, exposure) for x in images]
+    sep = np.full((panels[0].shape[0], 2, 3), 255, dtype=np.uint8)
+    path = os.path.join(out_dir, f"{compare_core.safe_file_stem(spec.name)}_blends.png")
+    write_png(path, np.concatenate([x for panel in panels for x in (panel, sep)][:-1], axis=1))
+    return {"vs_ours": out, "panels": ["Cycles", *ref.BLENDS], "files": {"blends_picture": path}}
 
 
 def with_multiple_scattering(model_id: str, p):
@@ -156,7 +188,7 @@ def ms_picture(cycles, single, network, truth, mask, gap: int = 2) -> np.ndarray
 
 
 def compare_params(model_id: str, p, forms, scenes, samples: int, resolution: int, seed: int, out_dir: str,
-                   label: str = "custom", ms: ms_truth.TruthSettings | None = None) -> dict:
+                   label: str = "custom", ms: ms_truth.TruthSettings | None = None, blends: bool = False) -> dict:
     """Build a temporary material per form, compare it, remove it again; write ``report.json``.
     With ``ms`` the materials have multiple scattering on and every scene is also compared with the Monte
     Carlo ground truth (``compare_material``); ``report["ms"]`` records the ground truth's settings."""
@@ -173,7 +205,7 @@ def compare_params(model_id: str, p, forms, scenes, samples: int, resolution: in
         try:
             mat = lamina_material.new_material(model_id, p, form, name=f"Lamina compare {label}")
             entries = compare_material(mat, scenes, samples, resolution, seed, os.path.join(out_dir, form),
-                                       reference_cache=references, ms=ms)
+                                       reference_cache=references, ms=ms, blends=blends)
         finally:
             blend_io.remove_new_data(before)
         report["forms"][form] = {scene: _json_entry(e, out_dir) for scene, e in entries.items()}
@@ -182,7 +214,7 @@ def compare_params(model_id: str, p, forms, scenes, samples: int, resolution: in
 
 
 REPORT_KEYS = ("rmse", "rel_rmse", "max_abs_error", "mapping_rel_rmse", "cycles_seconds", "reference_seconds",
-               "samples", "worst_pixels", "files", "ms")
+               "samples", "worst_pixels", "files", "ms", "blends")
 
 
 def _json_entry(entry: dict, out_dir: str) -> dict:
@@ -190,8 +222,9 @@ def _json_entry(entry: dict, out_dir: str) -> dict:
     out["files"] = {k: os.path.relpath(v, out_dir) for k, v in entry["files"].items()}
     out["worst_pixels"] = [[int(r), int(c), [float(x) for x in a], [float(x) for x in b]]
                            for r, c, a, b in entry["worst_pixels"]]
-    if "ms" in entry:
-        out["ms"] = {**entry["ms"], "files": {k: os.path.relpath(v, out_dir) for k, v in entry["ms"]["files"].items()}}
+    for key in ("ms", "blends"):
+        if key in entry:
+            out[key] = {**entry[key], "files": {k: os.path.relpath(v, out_dir) for k, v in entry[key]["files"].items()}}
     return out
 
 
@@ -203,6 +236,8 @@ def scene_lines(entries: dict) -> list[str]:
                      f"{e['reference_seconds']:.2f} s")
         if "ms" in e:
             lines.append("  " + ms_line(e["ms"]))
+        if "blends" in e:
+            lines.append("  other blends vs ours: " + ", ".join(f"{b} {d:.2%}" for b, d in e["blends"]["vs_ours"].items()))
     return lines
 
 

@@ -38,7 +38,7 @@ from . import microfacet, spongecake
 from .frames import as_directions, dot, normalize, reflect, spherical
 
 __all__ = ["Params", "Sample", "params_from_dict", "ndf", "sample_ndf", "tau_beta", "tau_plus", "w_plus",
-           "smith_lambda", "smith_lambda_paper", "smith_lambda_float32", "lambda_numeric", "g1", "g2",
+           "smith_lambda", "smith_lambda_paper", "smith_lambda_float32", "lambda_scheme", "lambda_numeric", "g1", "g2",
            "specular_albedo", "eval", "pdf", "sample", "directional_albedo", "furnace_albedo"]
 
 BLENDS = ("ours", "linear", "deon")
@@ -260,9 +260,10 @@ def smith_lambda_paper(w, tau0, beta, n_terms=4):
 # Float32 scheme: Gauss-Legendre nodes and weights on [0, 1], and the number of terms of M(1/2, 2, x).
 _F32_NODES = 6
 _F32_KUMMER_TERMS = 14
-_F32_X, _F32_W = np.polynomial.legendre.leggauss(_F32_NODES)
-_F32_X, _F32_W = 0.5 * (_F32_X + 1.0), 0.5 * _F32_W
-_F32_M = np.cumprod([1.0] + [(j + 0.5) / ((j + 1.0) * (j + 2.0)) for j in range(_F32_KUMMER_TERMS - 1)])
+_x, _w = np.polynomial.legendre.leggauss(_F32_NODES)
+SCHEME_NODES, SCHEME_WEIGHTS = tuple(float(x) for x in 0.5 * (_x + 1.0)), tuple(float(w) for w in 0.5 * _w)
+KUMMER_COEFFICIENTS = tuple(float(c) for c in np.cumprod([1.0] + [(j + 0.5) / ((j + 1.0) * (j + 2.0))
+                                                                  for j in range(_F32_KUMMER_TERMS - 1)]))
 
 
 def smith_lambda_float32(cos_theta, tau0, beta):
@@ -286,36 +287,63 @@ def smith_lambda_float32(cos_theta, tau0, beta):
     Measured against ``smith_lambda`` for θ <= 89°, τ0 in [0, 0.98], β in [1e-3, 1]: the scheme itself (run
     in float64) is within 1e-5 relative; in float32 the rounding of cos θ dominates, absolute error below
     1.1e-4 (Λ reaches 10.6 at 89°; at small θ, where cos θ rounds to 1, Λ is below 1e-6). Only
-    + − × ÷, abs, sqrt, exp, log, max and a select, with fixed loop counts: it transcribes line by line to OSL.
+    + − × ÷, abs, sqrt, exp, log, max and a select, with fixed loop counts: the Cycles mapping (nodes/micrograin.py) runs the same
+    ``lambda_scheme`` on its OSL and node-group backends.
     """
     c = np.abs(cos_theta)
-    dtype = np.result_type(c, tau0, beta)
-    one = dtype.type(1.0)
-    tau0, beta = np.asarray(tau0, dtype), np.asarray(beta, dtype)
-    grazing = c == 0
-    c = np.maximum(c, dtype.type(1e-18))  # keeps tan² finite in float32
-    a2 = beta * beta * ((one - c) * (one + c)) / (c * c)
-    r = np.sqrt(one + a2)
-    z = a2 / ((r + one) * (r + one))
+    ops = _DtypeOps(np.result_type(c, tau0, beta))
+    tau0, beta = np.asarray(tau0, ops.dtype), np.asarray(beta, ops.dtype)
+    lam = lambda_scheme(ops, ops.maximum(c.astype(ops.dtype), 1e-18), tau0, beta)  # 1e-18: tan² finite in float32
+    return np.where(c == 0, ops.dtype.type(np.inf), lam)
+
+
+def lambda_scheme(b, c, tau0, beta):
+    """The steps of ``smith_lambda_float32`` on an ``expr`` backend ``b`` (+ − × ÷ on values, ``b.exp``, ``b.log``,
+    ``b.sqrt``, ``b.maximum``, ``b.step_below``), for cos θ = ``c`` > 0: branches become arithmetic selects of
+    two finite values."""
+    a2 = beta * beta * ((1.0 - c) * (1.0 + c)) / (c * c)
+    r = b.sqrt(1.0 + a2)
+    z = a2 / ((r + 1.0) * (r + 1.0))
     z2 = z * z
-    series_l = dtype.type(2.0) * z * (one + z2 * (one / 3 + z2 * (one / 5 + z2 / 7)))
-    big_l = np.log(np.maximum(r, one))
-    ell = np.where(a2 < dtype.type(0.25), series_l, big_l)
+    near = b.step_below(a2, 0.25)
+    ell = near * (2.0 * z * (1.0 + z2 * (1.0 / 3.0 + z2 * (1.0 / 5.0 + z2 / 7.0)))) \
+        + (1.0 - near) * b.log(b.maximum(r, 1.0))
     t = tau0
-    series_p = one + t * (one / 2 + t * (one / 3 + t * (one / 4 + t * (one / 5 + t / 6))))
-    big_p = -np.log(one - t) / np.maximum(t, dtype.type(0.05))
-    p_over_tau = np.where(t < dtype.type(0.05), series_p, big_p)
+    small = b.step_below(t, 0.05)
+    p_over_tau = small * (1.0 + t * (1.0 / 2.0 + t * (1.0 / 3.0 + t * (1.0 / 4.0 + t * (1.0 / 5.0 + t / 6.0))))) \
+        + (1.0 - small) * (-b.log(1.0 - t) / b.maximum(t, 0.05))
     p = t * p_over_tau
-    total = np.zeros_like(ell)
-    for x_n, w_n in zip(_F32_X.astype(dtype), _F32_W.astype(dtype)):
-        e = np.exp(ell * x_n)
-        y = p * (one - one / (e * e))
-        m = np.full_like(y, _F32_M[-1].astype(dtype))
-        for coefficient in _F32_M[-2::-1].astype(dtype):
+    total = 0.0
+    for x_n, w_n in zip(SCHEME_NODES, SCHEME_WEIGHTS):
+        e = b.exp(ell * x_n)
+        y = p * (1.0 - 1.0 / (e * e))
+        m = KUMMER_COEFFICIENTS[-1]
+        for coefficient in KUMMER_COEFFICIENTS[-2::-1]:
             m = coefficient + y * m
         total = total + w_n * e * m
-    lam = dtype.type(0.5) * p_over_tau * (one - t) * ell * total
-    return np.where(grazing, dtype.type(np.inf), lam)
+    return 0.5 * p_over_tau * (1.0 - t) * ell * total
+
+
+class _DtypeOps:
+    """numpy ``expr`` operations that keep a dtype (float32 for the scheme's rounding tests)."""
+
+    def __init__(self, dtype):
+        self.dtype = np.dtype(dtype)
+
+    def sqrt(self, x):
+        return np.sqrt(x)
+
+    def exp(self, x):
+        return np.exp(x)
+
+    def log(self, x):
+        return np.log(x)
+
+    def maximum(self, a, b):
+        return np.maximum(a, self.dtype.type(b))
+
+    def step_below(self, x, edge):
+        return (x < edge).astype(self.dtype)
 
 
 def lambda_numeric(cos_theta, tau0: float, beta: float, n: int = 64):
@@ -470,6 +498,11 @@ def _bulk_model(bulk: Bulk):
 
 
 def _bulk_eval(bulk: Bulk, wi, wo):
+    """A dielectric bulk is a glass as renderers see it: Walter et al.'s f with ωi and ωo exchanged, so the
+    transmitted throughput seen from the viewer's side is 1 − F without the 1/η² of radiance entering a denser
+    medium (a pane's two interfaces cancel it; Cycles' Glass BSDF does the same, ``nodes.closures_np``)."""
+    if bulk.type == "dielectric":
+        return spongecake.substrate_bsdf(bulk.params, wo, wi)
     if bulk.type in SIMPLE_BULKS:
         return spongecake.substrate_bsdf(bulk.params, wi, wo)
     return _bulk_model(bulk).eval(bulk.params, wi, wo)
@@ -502,26 +535,42 @@ def _pore_weight(params: Params, wi, wo, blend):
 
 
 def _pore_transmittance(params: Params, w, blend):
-    """Share of light crossing the layer through the pores seen along w (the direction above)."""
+    """Share of light crossing the layer along w (the direction above) and the bulk's far side: the bulk's weight
+    for reflection, 1 − w(i, o), with the other direction's factor averaged over the hemisphere (cosine-weighted).
+    The pores seen along w, 1 − τ⁺ = g(θ) sqrt(1 − τ0), would count twice the pore area that w⁺ already gives to
+    the grains (pores shadowed from the light): white grains over a clear glass would reflect and transmit more
+    than they receive. ``ours`` g(θ) ḡ (g = sqrt(1 − τβ), ``_mean_of``); ``linear`` 1 − τ0; ``deon``
+    (1 − τ0) G1(θ) Ḡ1 (GGX(α̃); G1 G1 ≤ G2, so it stays below the bulk's reflection weight)."""
     tau0, beta = params.filling_factor, params.anfractuosity
-    if blend == "ours":
-        return 1.0 - tau_plus(w[:, 2], tau0, beta)
     if blend == "linear":
         return np.full(len(w), 1.0 - tau0)
-    return (1.0 - tau0) / (1.0 + microfacet.smith_lambda(w, params.roughness))
+    if blend == "ours":
+        def g(c):
+            return np.sqrt(1.0 - tau_beta(c, tau0, beta))
+    else:
+        def g(c):
+            return 1.0 / (1.0 + microfacet.smith_lambda(spherical(c, np.zeros_like(c)), params.roughness))
+    scale = 1.0 if blend == "ours" else 1.0 - tau0
+    return scale * g(w[:, 2]) * _mean_of(g)
+
+
+def _mean_of(g, n: int = 32) -> float:
+    """Cosine-weighted hemispherical mean 2 ∫ g(μ) μ dμ of a function of cos θ (Gauss-Legendre)."""
+    x, weights = np.polynomial.legendre.leggauss(n)
+    mu = 0.5 * (x + 1.0)
+    return float(np.sum(weights * mu * g(mu)))
 
 
 def eval(params: Params, wi, wo, blend="ours"):
     """Micrograin BSDF f(wi, wo) (N, 3), no cosine (Eq. 1); 0 at grazing.
 
     Both directions above: w f_S + (1 − w) f_B. One below (transmission through the bulk): f_B times the
-    share of light through the pores seen from the direction above, no grain term. Both below: f_B.
+    share of light through the layer (``_pore_transmittance``), no grain term. Both below: f_B.
 
-    ``blend`` picks w: ``ours`` w⁺ (Eq. 24; transmission 1 − τ⁺(θ), Eq. 22); ``linear`` w = τ0 (the paper's
-    Fig. 14 "linear mix by τ0"; transmission 1 − τ0); ``deon`` the weighting of d'Eon et al. 2023 matched by
-    Eq. 26 with w_A = τ0: 1 − w = (1 − τ0) G2_GGX(α̃)(i, o), the bulk seen through the grain layer's GGX(α̃)
-    masking-shadowing (transmission (1 − τ0) G1_GGX(α̃)). Eq. 26 as printed, (1 − w_A) / G, would grow towards
-    grazing, contradicting the paper's Fig. 11: this is our reading.
+    ``blend`` picks w: ``ours`` w⁺ (Eq. 24); ``linear`` w = τ0 (the paper's Fig. 14 "linear mix by τ0");
+    ``deon`` the weighting of d'Eon et al. 2023 matched by Eq. 26 with w_A = τ0: 1 − w = (1 − τ0) G2_GGX(α̃)(i, o),
+    the bulk seen through the grain layer's GGX(α̃) masking-shadowing. Eq. 26 as printed, (1 − w_A) / G, would
+    grow towards grazing, contradicting the paper's Fig. 11: this is our reading.
     """
     if blend not in BLENDS:
         raise ValueError(f"unknown blend {blend!r}; expected one of {', '.join(BLENDS)}")
