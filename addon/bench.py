@@ -13,6 +13,7 @@ vs off and the bake time per megapixel.
 from __future__ import annotations
 
 import datetime
+import importlib
 import os
 import time
 from dataclasses import dataclass
@@ -40,16 +41,17 @@ def _scenes(resolution: int):
     return [s.with_resolution(resolution // 2, resolution // 4) if s.kind == "furnace" else s for s in scenes]
 
 
-def mapping_errors(p, resolution: int) -> dict:
+def mapping_errors(p, resolution: int, model_id: str = MODEL) -> dict:
     """{form: {scene: rel RMSE of the prediction vs the reference}} plus the reference's mean per scene."""
+    ref_model = importlib.import_module(f".reference.{model_id}", __package__)
     out = {"osl": {}, "nodes": {}, "mean": {}}
     for spec in _scenes(resolution):
-        ref = ref_scenes.reference_image(spec, lambda wi, wo: reference.eval(p, wi, wo),
-                                         bsdf_albedo=lambda wo: reference.furnace_albedo(p, wo, n=ALBEDO_SAMPLES))
+        ref = ref_scenes.reference_image(spec, lambda wi, wo: ref_model.eval(p, wi, wo),
+                                         bsdf_albedo=lambda wo: ref_model.furnace_albedo(p, wo, n=ALBEDO_SAMPLES))
         mask = ref_scenes.scene_mask(spec)
         out["mean"][spec.name] = float(ref[mask].mean())
         for form in ("osl", "nodes"):
-            out[form][spec.name] = metrics.rel_rmse(predicted_image(MODEL, p, form, spec), ref, mask)
+            out[form][spec.name] = metrics.rel_rmse(predicted_image(model_id, p, form, spec), ref, mask)
     return out
 
 
@@ -653,6 +655,7 @@ def overview_picture(path: str, samples: int, resolution: int) -> None:
 
 def run(out_dir: str, samples: int = 64, resolution: int = 64, ms: MsSizes | None = MS_DEFAULT) -> None:
     """Both documents; ``ms`` sizes the multiple-scattering sections (None: leave them out)."""
+    from . import bench_micrograin
     from .operators.compare_run import write_text_atomic
 
     os.makedirs(out_dir, exist_ok=True)
@@ -660,10 +663,12 @@ def run(out_dir: str, samples: int = 64, resolution: int = 64, ms: MsSizes | Non
     accuracy = accuracy_markdown(resolution) + sheen_alternative(samples * 2, resolution)
     if ms is not None:
         accuracy += ms_accuracy_markdown(ms, samples, resolution)
+    accuracy += bench_micrograin.accuracy_markdown(resolution)
     write_text_atomic(os.path.join(out_dir, "accuracy.md"), accuracy)
     print(f"lamina: wrote {os.path.join(out_dir, 'accuracy.md')}", flush=True)
     speed = benchmarks_markdown(samples * 2, resolution * 4)
     if ms is not None:
         speed += ms_speed_markdown(ms, samples * 2, resolution * 4)
+    speed += bench_micrograin.speed_markdown(samples * 2, resolution * 4)
     write_text_atomic(os.path.join(out_dir, "benchmarks.md"), speed)
     print(f"lamina: wrote {os.path.join(out_dir, 'benchmarks.md')}", flush=True)
