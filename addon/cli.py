@@ -46,8 +46,12 @@ def build_parser() -> argparse.ArgumentParser:
     cp.add_argument("--ms-albedo-paths", type=int, default=4000, help="with --ms: furnace paths per pixel")
     cp.add_argument("--ms-stride", type=int, default=2,
                     help="with --ms: Monte Carlo at every n-th row and column (errors use those pixels)")
+    cp.add_argument("--blends", action="store_true",
+                    help="micrograin: also render the reference with the linear mix by the filling factor (Fig. 14) "
+                         "and d'Eon et al.'s weighting (Eq. 26), side by side with ours")
 
     dm = sub.add_parser("demo", help="compare every preset and write index.html")
+    dm.add_argument("--model", default="spongecake", choices=sorted(MODELS))
     _compare_args(dm)
     dm.add_argument("--out", default="out")
 
@@ -165,8 +169,14 @@ def cmd_compare(args) -> int:
     ms = _ms_settings(args, p) if args.ms else None
     from .operators import compare_run
 
+    reason = compare_run.refusal(args.model, p)
+    if reason:
+        raise CliError(reason)
+    if args.blends and not compare_run.has_blends(args.model):
+        raise CliError(f"--blends: model {args.model} has a single blending weight")
     report = compare_run.compare_params(args.model, p, forms, scenes, args.samples, args.resolution, args.seed,
-                                        os.path.abspath(args.out), label=args.preset or "custom", ms=ms)
+                                        os.path.abspath(args.out), label=args.preset or "custom", ms=ms,
+                                        blends=args.blends)
     print(compare_run.summary_lines(report))
     return 0
 
@@ -178,7 +188,9 @@ def _ms_settings(args, p):
     least = 2 * TruthSettings.batches  # at least 2 paths per batch
     if min(args.ms_paths, args.ms_albedo_paths) < least or args.ms_stride < 1:
         raise CliError(f"--ms-paths and --ms-albedo-paths must be ≥ {least} and --ms-stride ≥ 1")
-    if not hasattr(MODELS[args.model], "MS_MAX_LAYERS"):
+    from .operators import compare_run
+
+    if not compare_run.has_multiple_scattering(args.model):
         raise CliError(f"--ms: model {args.model} has no multiple scattering")
     try:
         MODELS[args.model].validate({**p.to_dict(), "multiple_scattering": True})
@@ -192,7 +204,7 @@ def cmd_demo(args) -> int:
     forms, scenes = _check_compare_args(args)
     from .operators import compare_run
 
-    compare_run.demo(forms, scenes, args.samples, args.resolution, args.seed, os.path.abspath(args.out))
+    compare_run.demo(forms, scenes, args.samples, args.resolution, args.seed, os.path.abspath(args.out), args.model)
     print(f"lamina: open {os.path.join(os.path.abspath(args.out), 'index.html')}")
     return 0
 

@@ -27,6 +27,11 @@ class LaminaCompareSettings(bpy.types.PropertyGroup):
     ms_stride: bpy.props.IntProperty(
         name="Monte Carlo stride", default=2, min=1, max=16,
         description="The ground truth runs at every n-th row and column; errors use those pixels")
+    blends: bpy.props.BoolProperty(
+        name="Other blending weights", default=False,
+        description="Porous layers: also render the reference with a plain linear mix by the filling factor (the "
+                    "paper's Fig. 14) and with d'Eon et al.'s weighting (Eq. 26), beside the view- and "
+                    "light-dependent weight")
     last_report: bpy.props.StringProperty(name="Last report", default="")
 
 
@@ -54,16 +59,21 @@ class LAMINA_OT_compare(bpy.types.Operator):
 
     def _refusal(self, context) -> str | None:
         """Why the comparison cannot run with these settings (None: it can)."""
-        if not context.window_manager.lamina_compare.multiple_scattering:
-            return None
         from ..models.params import ParamError
 
         model_id, p = lamina_material.current_params(context.material)
+        reason = compare_run.refusal(model_id, p)
+        if reason or not self._multiple_scattering(context, model_id):
+            return reason
         try:
             compare_run.with_multiple_scattering(model_id, p)
         except (ParamError, KeyError) as e:
             return f"Multiple scattering: {e}"
         return None
+
+    @staticmethod
+    def _multiple_scattering(context, model_id: str) -> bool:
+        return context.window_manager.lamina_compare.multiple_scattering and compare_run.has_multiple_scattering(model_id)
 
     def invoke(self, context, event):
         refusal = self._refusal(context)
@@ -105,13 +115,16 @@ class LAMINA_OT_compare(bpy.types.Operator):
         if context.workspace is not None:
             context.workspace.status_text_set(f"Lamina: comparing {self._mat.name} ({scene})…")
         settings = context.window_manager.lamina_compare
+        model_id = lamina_material.info(self._mat)["model"]
         ms = None
-        if settings.multiple_scattering:
+        if self._multiple_scattering(context, model_id):
             from ..ms_truth import TruthSettings
 
             ms = TruthSettings(paths=settings.ms_paths, albedo_paths=2 * settings.ms_paths, stride=settings.ms_stride)
+        blends = settings.blends and compare_run.has_blends(model_id)
         self._done.append(compare_run.compare_material(self._mat, [scene], settings.samples, settings.resolution,
-                                                       0, self._out, reference_cache=self._cache, ms=ms))
+                                                       0, self._out, reference_cache=self._cache, ms=ms,
+                                                       blends=blends))
         context.window_manager.progress_update(len(self._done))
         return True
 

@@ -45,6 +45,24 @@ def reference_module(model_id: str):
     return importlib.import_module(f"..reference.{model_id}", __package__)
 
 
+def refusal(model_id: str, p) -> str | None:
+    """Why ``p`` cannot be compared with its reference (None: it can): a porous layer over a material's own shader
+    has no reference bulk."""
+    bulk = getattr(p, "bulk", None)
+    if bulk is not None and bulk.type == MODELS["micrograin"].WRAPPED:
+        return ("this porous layer wraps a material's own shader, which has no reference; compare a porous layer "
+                "over a reference bulk (diffuse, conductor, dielectric or another Lamina model)")
+    return None
+
+
+def has_multiple_scattering(model_id: str) -> bool:
+    return hasattr(MODELS[model_id], "MS_MAX_LAYERS")
+
+
+def has_blends(model_id: str) -> bool:
+    return hasattr(reference_module(model_id), "BLENDS")
+
+
 # Samples per pixel of the reference's directional albedo (furnace scene): ~0.7% relative noise.
 ALBEDO_SAMPLES = 4096
 
@@ -101,7 +119,7 @@ def blend_comparison(model_id: str, p, spec, cycles, reference, out_dir: str, ca
     ours: their relative RMSE from ours, and ``<scene>_blends.png`` = Cycles | ours | each other blend, one
     exposure."""
     ref = reference_module(model_id)
-    if not hasattr(ref, "BLENDS"):
+    if not has_blends(model_id):
         raise ValueError(f"{model_id} has a single blending weight")
     mask = ref_scenes.scene_mask(spec)
     images, out = [cycles, reference], {}
@@ -255,12 +273,16 @@ def summary_lines(report: dict) -> str:
 
 
 def show_side_by_side(context, entries: dict, out_dir: str):
-    """Load the first scene's side-by-side picture (with multiple scattering: its ``ms_picture``) as the image
+    """Load the first scene's side-by-side picture (with multiple scattering its ``ms_picture``, with other blends
+    its ``blends_picture``) as the image
     "Lamina Compare" and show it in an Image Editor."""
     import bpy
 
     first = next(iter(entries.values()))
-    path = first["ms"]["files"]["ms_picture"] if "ms" in first else first["files"]["side_by_side"]
+    path = first["files"]["side_by_side"]
+    for key, picture in (("ms", "ms_picture"), ("blends", "blends_picture")):
+        if key in first:
+            path = first[key]["files"][picture]
     old = bpy.data.images.get("Lamina Compare")
     if old is not None:  # Lamina's own picture from a previous comparison
         bpy.data.images.remove(old)

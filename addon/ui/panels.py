@@ -149,6 +149,8 @@ class LAMINA_PT_compare(bpy.types.Panel):
             if settings.multiple_scattering:
                 col.prop(settings, "ms_paths")
                 col.prop(settings, "ms_stride")
+        if info["model"] == micrograin.ID:
+            col.prop(settings, "blends")
         row = layout.row()
         row.enabled = not wrapped
         row.operator("lamina.compare", icon="IMAGE_REFERENCE")
