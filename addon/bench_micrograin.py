@@ -90,6 +90,39 @@ def grain_albedo_fit() -> dict:
     return worst
 
 
+def view_weight_alternatives(resolution: int) -> list[dict]:
+    """Each preset with w⁺ = 1 − g(θi) g(θo) (g = sqrt(1 − τβ)) replaced by a view-only stand-in and everything
+    else exact: "mirror" g(θi) → g(θo) (what the Cycles forms do: exact at the specular configuration), "average"
+    g(θi) → ḡ, its cosine-weighted mean (exact in a white furnace over a diffuse bulk, never at the specular
+    configuration). Relative RMSE against the reference."""
+    rows = []
+    for name in presets.names(MODEL):
+        p = model.params_from_dict(presets.load(MODEL, name))
+
+        def g(c):
+            return np.sqrt(1.0 - reference.tau_beta(c, p.filling_factor, p.anfractuosity))
+
+        stand_ins = {"mirror": g, "average": lambda c: np.full_like(c, reference.hemispherical_mean(g))}
+        for spec in ref_scenes.default_scenes(resolution):
+            if spec.name == "backlit":
+                continue
+            mask = ref_scenes.scene_mask(spec)
+            exact = ref_scenes.reference_image(spec, lambda wi, wo: reference.eval(p, wi, wo))
+            row = {"preset": name, "scene": spec.name}
+            for variant, g_light in stand_ins.items():
+                def f(wi, wo, _g=g_light):
+                    out = reference.eval(p, wi, wo)
+                    both = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+                    grains, bulk = reference.reflection_terms(p, wi[both], wo[both])
+                    keep = (g(wo[both, 2]) * _g(wo[both, 2]))[:, None]
+                    out[both] = (1.0 - keep) * grains + keep * bulk
+                    return out
+
+                row[variant] = metrics.rel_rmse(ref_scenes.reference_image(spec, f), exact, mask)
+            rows.append(row)
+    return rows
+
+
 def blend_differences(resolution: int) -> list[dict]:
     """Relative RMSE of the reference with the linear mix and d'Eon's weighting against ours, per preset."""
     rows = []
@@ -160,6 +193,15 @@ def accuracy_markdown(resolution: int) -> str:
         for scene in ACCURACY_SCENES:
             lines.append(f"| {name} | {scene} | {errs['mean'][scene]:.4f} | {_pct(errs['osl'][scene])} | "
                          f"{_pct(errs['nodes'][scene])} |")
+    lines += ["", "## The view-only stand-in for w⁺", "",
+              "w⁺ = 1 − g(θi) g(θo) needs the light direction, which a closure weight cannot see. Candidates for "
+              "g(θi), each alone (everything else exact): the mirror configuration g(θo), which the Cycles forms "
+              "use because it is exact at the specular configuration (where glossy bulks and grains send their "
+              "light), and the cosine-weighted mean ḡ, which is right on average for matte bulks.", "",
+              "| preset | bulk | scene | mirror g(θo) | mean ḡ |", "|---|---|---|---|---|"]
+    for r in view_weight_alternatives(resolution):
+        bulk = model.params_from_dict(presets.load(MODEL, r["preset"])).bulk.type
+        lines.append(f"| {r['preset']} | {bulk} | {r['scene']} | {_pct(r['mirror'])} | {_pct(r['average'])} |")
     lines += ["", "## Other blending weights against ours (the paper's Fig. 14 and Eq. 26)", "",
               "Relative RMSE of the reference with the linear mix by τ0 and with d'Eon et al.'s weighting "
               "(w_A = τ0, our reading of Eq. 26) against the reference with w⁺: what `lamina compare --blends` "

@@ -39,7 +39,8 @@ from .frames import as_directions, dot, normalize, reflect, spherical
 
 __all__ = ["Params", "Sample", "params_from_dict", "ndf", "sample_ndf", "tau_beta", "tau_plus", "w_plus",
            "smith_lambda", "smith_lambda_paper", "smith_lambda_float32", "lambda_scheme", "lambda_numeric", "g1", "g2",
-           "specular_albedo", "eval", "pdf", "sample", "directional_albedo", "furnace_albedo"]
+           "specular_albedo", "eval", "pdf", "sample", "directional_albedo", "furnace_albedo", "reflection_terms",
+           "hemispherical_mean"]
 
 BLENDS = ("ours", "linear", "deon")
 TABLE_SIZE = 64  # cosines of the tabulated specular albedo (T̄ stand-in)
@@ -539,7 +540,7 @@ def _pore_transmittance(params: Params, w, blend):
     for reflection, 1 − w(i, o), with the other direction's factor averaged over the hemisphere (cosine-weighted).
     The pores seen along w, 1 − τ⁺ = g(θ) sqrt(1 − τ0), would count twice the pore area that w⁺ already gives to
     the grains (pores shadowed from the light): white grains over a clear glass would reflect and transmit more
-    than they receive. ``ours`` g(θ) ḡ (g = sqrt(1 − τβ), ``_mean_of``); ``linear`` 1 − τ0; ``deon``
+    than they receive. ``ours`` g(θ) ḡ (g = sqrt(1 − τβ), ``hemispherical_mean``); ``linear`` 1 − τ0; ``deon``
     (1 − τ0) G1(θ) Ḡ1 (GGX(α̃); G1 G1 ≤ G2, so it stays below the bulk's reflection weight)."""
     tau0, beta = params.filling_factor, params.anfractuosity
     if blend == "linear":
@@ -551,10 +552,10 @@ def _pore_transmittance(params: Params, w, blend):
         def g(c):
             return 1.0 / (1.0 + microfacet.smith_lambda(spherical(c, np.zeros_like(c)), params.roughness))
     scale = 1.0 if blend == "ours" else 1.0 - tau0
-    return scale * g(w[:, 2]) * _mean_of(g)
+    return scale * g(w[:, 2]) * hemispherical_mean(g)
 
 
-def _mean_of(g, n: int = 32) -> float:
+def hemispherical_mean(g, n: int = 32) -> float:
     """Cosine-weighted hemispherical mean 2 ∫ g(μ) μ dμ of a function of cos θ (Gauss-Legendre)."""
     x, weights = np.polynomial.legendre.leggauss(n)
     mu = 0.5 * (x + 1.0)
@@ -586,6 +587,13 @@ def eval(params: Params, wi, wo, blend="ours"):
         above = np.where(up_i[through, None], wi[through], wo[through])
         f[through] = f[through] * _pore_transmittance(params, above, blend)[:, None]
     return np.where(((wi[:, 2] != 0) & (wo[:, 2] != 0))[:, None], f, 0.0)
+
+
+def reflection_terms(params: Params, wi, wo):
+    """The terms Eq. 1 blends for directions both above: (f_S, f_B), each (N, 3), so that other weights than w⁺
+    can be measured (docs/accuracy.md: view-only stand-ins for w⁺)."""
+    wi, wo = as_directions(wi), as_directions(wo)
+    return _grain_bsdf(params, wi, wo), _bulk_eval(params.bulk, wi, wo)
 
 
 def _lobe_probabilities(params: Params, wi):
