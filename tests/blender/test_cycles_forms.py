@@ -146,17 +146,21 @@ def test_extreme_parameters_render_finite_non_negative_pixels(config, form, tmp_
         assert np.all(np.isfinite(img)) and np.all(img >= 0), spec.name
 
 
+@pytest.mark.parametrize("model_id, name", [("spongecake", "leaf"), ("micrograin", "mud_on_plastic")])
 @pytest.mark.parametrize("form", ["nodes", "osl"])
-def test_saved_blend_renders_the_same_without_lamina(form, tmp_path):
-    """Rendered here (Lamina loaded) and in a fresh process where Lamina cannot even be imported."""
+def test_saved_blend_renders_the_same_without_lamina(form, model_id, name, tmp_path):
+    """Rendered here (Lamina loaded) and in a fresh process where Lamina cannot even be imported (the porous
+    layer's bulk is a second Lamina node: SpongeCake plastic)."""
+    from addon.models import MODELS
+
     blend = tmp_path / "m.blend"
-    p = model.params_from_dict(presets.load(model.ID, "leaf"))
-    blend_io.write_material_blend(model.ID, p, form, "leaf", str(blend))
-    render = textwrap.dedent("""
+    p = MODELS[model_id].params_from_dict(presets.load(model_id, name))
+    blend_io.write_material_blend(model_id, p, form, name, str(blend))
+    render = textwrap.dedent(f"""
         def render(blend, out):
             import bpy
             bpy.ops.wm.open_mainfile(filepath=blend)
-            scene = bpy.data.scenes["Lamina leaf"]
+            scene = bpy.data.scenes["Lamina {name}"]
             scene.render.resolution_x = scene.render.resolution_y = 32
             scene.cycles.samples = 16
             scene.render.image_settings.file_format = "OPEN_EXR"
