@@ -62,6 +62,10 @@ class NumpyBackend:
     def normal(self):
         return np.broadcast_to(np.array([0.0, 0.0, 1.0]), (self.n, 3))
 
+    def backfacing(self):
+        """1 where the viewer is below the surface (Cycles then flips the normal towards it), else 0."""
+        return np.where(self.wo[:, 2] < 0.0, 1.0, 0.0)
+
     def upper_hemisphere(self, d):
         """The unit direction ``d`` (from ``direction``), or −d where it points below the tangent plane."""
         return np.where(d[:, 2:3] < 0.0, -d, d)
@@ -243,6 +247,9 @@ class OslBackend:
 
     def normal(self):
         return OslValue("N", "normal")
+
+    def backfacing(self):
+        return self._let(OslValue("(backfacing() ? 1.0 : 0.0)", "float"))
 
     def upper_hemisphere(self, d):
         return self._let(OslValue(f"dot({d.code}, N) < 0.0 ? -{d.code} : {d.code}", "normal"))

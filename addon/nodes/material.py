@@ -18,7 +18,7 @@ from dataclasses import replace
 import bpy
 
 from ..models import MODELS
-from ..models.micrograin import WRAPPED
+from ..models.micrograin import WRAPPED, Bulk
 from . import FORMS, MAPPINGS, osl
 from .expr import BULK_INPUT, TANGENT_INPUT, OslBackend
 from .node_backend import NodeBackend
@@ -145,8 +145,9 @@ def info(mat) -> dict:
 
 
 def current_params(mat):
-    """The material's parameters as they are now: the stored dict updated with the shader node's inputs (and,
-    under a porous layer, with the inputs of the Lamina bulk node)."""
+    """The material's parameters as they are now: the stored dict updated with the shader node's inputs. Under a
+    porous layer, the reference bulk's values come from the node ``Lamina Bulk``; when that node no longer feeds
+    the layer's Bulk input (the user plugged their own shader in), the bulk is the wrapped shader."""
     data = info(mat)
     model_id = data["model"]
     p = MODELS[model_id].params_from_dict(data["params"])
@@ -154,11 +155,21 @@ def current_params(mat):
     if node is None:
         return model_id, p
     p = _read_params(node, model_id, p)
-    bulk = mat.node_tree.nodes.get(BULK_NODE)
-    if bulk is not None and _has_reference_bulk(model_id, p):
+    if _has_reference_bulk(model_id, p):
+        bulk = _bulk_node(node)
+        if bulk is None:
+            return model_id, replace(p, bulk=Bulk(WRAPPED, None))
         bulk_id, params = MAPPINGS[model_id].bulk_shader(p)
         p = replace(p, bulk=replace(p.bulk, params=_read_params(bulk, bulk_id, params)))
     return model_id, p
+
+
+def _bulk_node(layer):
+    """The node ``Lamina Bulk`` when it feeds ``layer``'s Bulk input, else None."""
+    socket = layer.inputs.get(BULK_INPUT)
+    if socket is None or not socket.is_linked or socket.links[0].from_node.name != BULK_NODE:
+        return None
+    return socket.links[0].from_node
 
 
 def _read_params(node, mapping_id: str, p):
@@ -189,12 +200,12 @@ def set_multiple_scattering(mat, on: bool) -> None:
 def insert_layer(mat, model_id: str, p, form: str, surface) -> None:
     """Put a new Lamina node for the porous layer ``p`` between a Material Output and the shader linked into its
     ``surface`` input: that shader feeds the node's Bulk input, the node the output, which moves right to make
-    room. The node is built first (nothing is touched if that fails). When ``p`` has a reference bulk, the shader
+    room. The nodes are built first (nothing is touched if that fails). When ``p`` has a reference bulk, the shader
     that fed the output must be the node ``Lamina Bulk`` (another Lamina material's node, renamed): it is rebuilt in
     ``form`` like ``set_form`` does. Records the parameters like ``_rebuild``. The material must have no node named
     ``Lamina``."""
     tree = mat.node_tree
-    node = _new_node(mat, model_id, p, form)
+    node, bulk = _new_nodes(mat, model_id, p, form)
     out = surface.node
     node.parent = out.parent
     node.location = out.location
@@ -202,7 +213,7 @@ def insert_layer(mat, model_id: str, p, form: str, surface) -> None:
     tree.links.new(surface.links[0].from_socket, node.inputs[BULK_INPUT])
     tree.links.new(node.outputs["BSDF"], surface)
     _replace(mat, None, node)
-    _build_bulk(mat, model_id, p, form)
+    _place_bulk(mat, bulk)
     mat["lamina"] = json.dumps({"model": model_id, "params": p.to_dict()})
     bake_constants(mat)
 
@@ -275,10 +286,26 @@ def shader_node(mat):
 
 def _build_tree(mat, model_id: str, p, form: str) -> None:
     """Put the Lamina node in ``form`` into the material, replacing only Lamina's own nodes (``_replace``);
-    nothing is touched if generation fails (the group is built and the OSL compiled first). A porous layer's
-    reference bulk gets a Lamina node of its own (``_build_bulk``)."""
-    _replace(mat, shader_node(mat), _new_node(mat, model_id, p, form))
-    _build_bulk(mat, model_id, p, form)
+    nothing is touched if generation fails (the nodes are built first: groups built, OSL compiled). A porous
+    layer's reference bulk gets a Lamina node of its own, ``Lamina Bulk``."""
+    node, bulk = _new_nodes(mat, model_id, p, form)
+    _replace(mat, shader_node(mat), node)
+    _place_bulk(mat, bulk)
+
+
+def _new_nodes(mat, model_id: str, p, form: str):
+    """The new layer node and, for a porous layer over a reference bulk that still feeds it, the new bulk node
+    (a simple BSDF always as a node group, another model in ``form``), or None; nothing is left if either fails."""
+    node = _new_node(mat, model_id, p, form)
+    layer = shader_node(mat)
+    if not _has_reference_bulk(model_id, p) or (layer is not None and _user_bulk(layer)):
+        return node, None
+    bulk_id, params = MAPPINGS[model_id].bulk_shader(p)
+    try:
+        return node, _new_node(mat, bulk_id, params, "nodes" if bulk_id not in MODELS else form)
+    except BaseException:
+        mat.node_tree.nodes.remove(node)
+        raise
 
 
 def _new_node(mat, mapping_id: str, p, form: str):
@@ -312,24 +339,24 @@ def _has_reference_bulk(model_id: str, p) -> bool:
     return hasattr(MAPPINGS[model_id], "bulk_shader") and p.bulk.type != WRAPPED
 
 
-def _build_bulk(mat, model_id: str, p, form: str) -> None:
-    """A porous layer's reference bulk (a simple BSDF, always a node group, or another model in ``form``) as the
-    node ``Lamina Bulk`` feeding the layer's Bulk input, rebuilt with the layer. A shader that the user plugged
-    into the Bulk input instead is left alone."""
-    if not _has_reference_bulk(model_id, p):
+def _user_bulk(layer) -> bool:
+    """Whether a shader other than Lamina's bulk node feeds the layer's Bulk input (the user's: left alone)."""
+    socket = layer.inputs[BULK_INPUT]
+    return socket.is_linked and _bulk_node(layer) is None
+
+
+def _place_bulk(mat, node) -> None:
+    """Put the new bulk node (None: nothing to do) in place of ``Lamina Bulk``, feeding the layer's Bulk input."""
+    if node is None:
         return
     tree = mat.node_tree
-    socket = shader_node(mat).inputs[BULK_INPUT]
+    layer = shader_node(mat)
     old = tree.nodes.get(BULK_NODE)
-    if socket.is_linked and socket.links[0].from_node != old:
-        return
-    bulk_id, params = MAPPINGS[model_id].bulk_shader(p)
-    node = _new_node(mat, bulk_id, params, "nodes" if bulk_id not in MODELS else form)
     if old is None:
-        layer = shader_node(mat)
         node.parent = layer.parent
         node.location = (layer.location.x - 300, layer.location.y)
     _replace(mat, old, node, BULK_NODE)
+    socket = layer.inputs[BULK_INPUT]
     if not socket.is_linked:
         tree.links.new(node.outputs[0], socket)
 

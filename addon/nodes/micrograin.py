@@ -4,7 +4,8 @@ The node takes the material under the grains as a Shader input (``Bulk``), so it
 the grains' BRDF f_S and the bulk's f_B with the weight w⁺(i, o) of Eq. 24, whose complement factorises as
 1 − w⁺ = g(θi) g(θo), g = sqrt(1 − τβ) (research notes §3). A closure weight cannot depend on the light, so
 g(θi) is taken at the mirror configuration θi = θo: the bulk gets 1 − τβ(θo) and the grains τβ(θo), exact at
-the specular configuration. [approx: view-only-weight] The bulk's transmission (glass) gets that weight too,
+the specular configuration. [approx: view-only-weight] Seen from below the surface (the inner side of a glass's
+far face, where Cycles flips the normal towards the viewer) the layer is its bulk, as in the reference. The bulk's transmission (glass) gets that weight too,
 where the reference has g(θo) ḡ (ḡ the hemispherical mean of g; ``reference.micrograin``). [approx: bulk-transmission-weight]
 
 The grains' specular lobe is Cycles' GGX with the equivalent roughness α̃ of Eq. 18, whose D equals the
@@ -108,8 +109,8 @@ def shade(b, p: model.Params) -> None:
     beta = b.minimum(b.maximum(b.input("Anfractuosity", "float"), model.MIN_ANFRACTUOSITY), 1.0)
     log_pores = b.log(1.0 - tau0)  # −P = ln(1 − τ0) (Eq. 13)
     pores = b.exp(log_pores * b.sqrt(mu * mu + beta * beta * (1.0 - mu * mu)) / mu)  # 1 − τβ(θo) (Eq. 21)
-    grains = 1.0 - pores
-    b.bulk(pores)
+    grains = (1.0 - pores) * (1.0 - b.backfacing())  # seen from inside (a glass's far face), no grains
+    b.bulk(1.0 - grains)
     alpha = beta * _roughness_factor(b, tau0, log_pores)
     if p.grain.type == "diffuse":
         b.diffuse(b.scale(b.input("Grain Albedo", "color"), grains))

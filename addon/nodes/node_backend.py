@@ -93,18 +93,19 @@ class NodeBackend:
     def geometry(self):
         if self._geometry is None:
             geo = self._node("ShaderNodeNewGeometry", 0)  # its Tangent is the closures' default tangent
-            self._geometry = (geo.outputs["Normal"], geo.outputs["Incoming"], geo.outputs["Tangent"])
+            self._geometry = (geo.outputs["Normal"], geo.outputs["Incoming"], geo.outputs["Tangent"],
+                              geo.outputs["Backfacing"])
         return self._geometry
 
     def cos_view(self):
-        normal, incoming, _ = self.geometry()
+        normal, incoming = self.geometry()[:2]
         d = self._vector("DOT_PRODUCT", NodeValue(self, normal, "color", 1), NodeValue(self, incoming, "color", 1),
                          out="Value")
         return self.maximum(d, MIN_COS)
 
     def direction(self, v: NodeValue) -> NodeValue:
         """Tangent-space direction → world: x·T + y·(N×T) + z·N, normalised."""
-        normal, _, tangent = self.geometry()
+        normal, _, tangent = self.geometry()[:3]
         n = NodeValue(self, normal, "color", 1)
         t = NodeValue(self, tangent, "color", 1)
         sep = self._node("ShaderNodeSeparateXYZ", _depth(v))
@@ -116,6 +117,9 @@ class NodeBackend:
 
     def normal(self):
         return NodeValue(self, self.geometry()[0], "color", 1)
+
+    def backfacing(self):
+        return NodeValue(self, self.geometry()[3], "float", 1)
 
     def upper_hemisphere(self, d: NodeValue) -> NodeValue:
         """``d``, or −d where it points below the tangent plane: d · (1 − 2 [d·N < 0])."""
@@ -248,18 +252,20 @@ class NodeBackend:
 
     def conductor(self, color, alpha, eta, k):
         """Metallic BSDF with the physical conductor Fresnel (4.3+), whose colour inputs are then unused: the
-        (grey) weight goes through a Mix Shader. 4.2 has no such node: a Principled metal with the complex
+        (grey) weight w goes through Mix Shaders, whose factor Cycles clamps to [0, 1], so w up to 2 is split
+        into min(w, 1) and min(max(w − 1, 0), 1). 4.2 has no such node: a Principled metal with the complex
         IOR's normal-incidence reflectance as F0 (F82 model). [approx: conductor-f0-blender-4.2]"""
         if hasattr(bpy.types, "ShaderNodeBsdfMetallic"):
             depth = _depth(color, alpha, eta, k) + 1
             metal = self._node("ShaderNodeBsdfMetallic", depth, distribution="GGX", fresnel_type="PHYSICAL_CONDUCTOR")
             for name, value in {"Roughness": self._roughness(alpha), "IOR": eta, "Extinction": k}.items():
                 self._link_or_set(value, metal.inputs[name])
-            mix = self._node("ShaderNodeMixShader", depth + 1)
             gray = self._vector("DOT_PRODUCT", color, (1.0 / 3.0,) * 3, out="Value")
-            self._link_or_set(gray, mix.inputs["Fac"])
-            self.links.new(metal.outputs[0], mix.inputs[2])
-            self._add(mix.outputs[0], depth + 1)
+            for part in (self.minimum(gray, 1.0), self.minimum(self.maximum(gray - 1.0, 0.0), 1.0)):
+                mix = self._node("ShaderNodeMixShader", _depth(part) + 1)
+                self._link_or_set(part, mix.inputs["Fac"])
+                self.links.new(metal.outputs[0], mix.inputs[2])
+                self._add(mix.outputs[0], _depth(part) + 1)
         else:
             k2 = k * k if isinstance(k, NodeValue) else tuple(float(x) * float(x) for x in k)
             f0 = ((eta - 1.0) * (eta - 1.0) + k2) / ((eta + 1.0) * (eta + 1.0) + k2)

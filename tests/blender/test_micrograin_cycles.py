@@ -15,6 +15,7 @@ from addon.reference import scenes as S  # noqa: E402
 pytestmark = pytest.mark.blender
 SPHERE = S.sphere_scene(resolution=32)
 BACKLIT = S.backlit_scene(resolution=(32, 16))
+PLANE = S.plane_scene(resolution=(32, 16))
 FURNACE = S.furnace_scene(resolution=(24, 12))
 
 
@@ -34,13 +35,19 @@ def _relative(img, predicted, spec):
     return metrics.rmse(img, predicted, mask) / max(predicted[mask].mean(), 1e-3)
 
 
-@pytest.mark.parametrize("name", presets.names(model.ID))
+# Beyond the presets: dense metal grains, whose specular weight (G ratio ≥ 1) exceeds 1 at oblique views.
+DENSE_METAL = {"filling_factor": 0.98, "anfractuosity": 1.0, "bulk": {"type": "diffuse", "albedo": [0.2, 0.2, 0.2]},
+               "grain": {"type": "conductor", "ior": [0.2, 0.9, 1.1], "k": [3.9, 2.4, 2.1]}}
+
+
+@pytest.mark.parametrize("name", presets.names(model.ID) + ["dense_metal"])
 @pytest.mark.parametrize("form", ["nodes", "osl"])
 def test_cycles_renders_the_predicted_mapping(name, form, tmp_path):
     """The generated node group / OSL (and the bulk node under it) compute exactly the mapping's closures."""
-    p = model.params_from_dict(presets.load(model.ID, name))
+    p = model.params_from_dict(DENSE_METAL if name == "dense_metal" else presets.load(model.ID, name))
     mat = material.new_material(model.ID, p, form)
-    scenes = [SPHERE, FURNACE] + ([BACKLIT] if p.bulk.type == "dielectric" else [])
+    scenes = [SPHERE, FURNACE, PLANE] if name == "dense_metal" else [SPHERE, FURNACE]
+    scenes += [BACKLIT] if p.bulk.type == "dielectric" else []
     for spec in scenes:
         img = _render(mat, spec, 128 if spec is FURNACE else 32, tmp_path)
         err = _relative(img, predicted_image(model.ID, p, form, spec), spec)

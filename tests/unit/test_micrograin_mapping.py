@@ -44,3 +44,14 @@ def test_the_dielectric_grains_albedo_fit_beats_the_smooth_interface():
     """Measured: 0.074 largest |E_spec error| over the fit's range, against 0.83 for F(θ)."""
     worst = bench_micrograin.grain_albedo_fit()
     assert worst["fit"] < 0.08 < 0.5 < worst["fresnel"]
+
+
+def test_seen_from_below_the_layer_is_its_bulk():
+    """Cycles flips the normal towards a viewer below (a glass's far face seen from inside): no grains there."""
+    p = model.params_from_dict({"filling_factor": 0.9, "grain": {"type": "conductor"},
+                                "bulk": {"type": "dielectric", "roughness": 0.2}})
+    wo = -WO
+    wi = spherical(np.full_like(MU, -0.5), np.full_like(MU, 1.0))
+    np.testing.assert_array_equal(predicted_eval(model.ID, p, "osl")(wi, wo),
+                                  predicted_eval("bulk", p.bulk.params, "osl")(wi, wo))
+    assert np.any(predicted_eval(model.ID, p, "osl")(MIRROR, WO) != predicted_eval("bulk", p.bulk.params, "osl")(MIRROR, WO))
