@@ -164,7 +164,8 @@ def accuracy_markdown(resolution: int) -> str:
             lines.append(f"| {tau0} | {beta} | " + " | ".join(f"{x:.3f}" for x in tv) + " |")
     lines += ["", "## Λ (Eq. 25): exact series, the paper's five terms, GGX(α̃), the float32 scheme", "",
               "Largest |G1 error| over θ ≤ 89° against the exact Λ (`reference.micrograin.smith_lambda`, within "
-              "1e-13 of a high-precision integral). The paper's five-term series cancels catastrophically in "
+              "1e-8 of a brute-force integral of the NDF in the tests). The paper's five-term series cancels "
+              "catastrophically in "
               "float32 (inf: NaN or overflow); the float32 scheme (`smith_lambda_float32`) is what both Cycles "
               "forms evaluate.", "",
               "| τ0 | β | paper n=4 (float64) | paper n=4 (float32) | GGX(α̃) | float32 scheme |",

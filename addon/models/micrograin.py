@@ -22,6 +22,7 @@ LABEL = "Micrograin"
 MAX_FILLING = 0.98  # Sec. 4.2: keeps the largest equivalent roughness above 0.5
 MIN_ANFRACTUOSITY = 1e-3
 GRAIN_TYPES = ("diffuse", "dielectric", "conductor")
+GRAIN_LABELS = {"diffuse": "Diffuse", "dielectric": "Diffuse + specular", "conductor": "Conductor"}
 SIMPLE_BULKS = ("diffuse", "conductor", "dielectric")
 WRAPPED = "shader"  # the bulk is a material's own shader (Add Porous Layer): Cycles only, no reference
 GAF_TYPES = ("series", "ggx")
@@ -164,7 +165,7 @@ def validate(data: dict) -> Validated:
         if fields["anfractuosity"] > 1.0:
             warnings.append(f"micrograin: roughness {roughness:g} is above the largest equivalent roughness "
                             f"{equivalent_roughness(layer['filling_factor'], 1.0):.3g} at filling factor "
-                            f"{layer['filling_factor']:g}; using anfractuosity 1")
+                            f"{layer['filling_factor']:g}; using that largest one (anfractuosity 1)")
             fields["anfractuosity"] = 1.0
     anfractuosity = read_fields(LAYER[1:], {k: v for k, v in fields.items() if k == "anfractuosity"},
                                 "micrograin: ", warnings)["anfractuosity"]

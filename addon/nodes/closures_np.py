@@ -162,7 +162,9 @@ def conductor(wi, wo, alpha, eta, k):
 def dielectric(wi, wo, alpha, ior):
     """Cycles' rough glass (Glass BSDF / dielectric_bsdf): Walter et al.'s GGX dielectric with ωi and ωo exchanged.
     Cycles evaluates the adjoint (a path tracer's throughput from the camera, no radiance scaling): seen from
-    above with light from below, a white furnace shows F + (1 − F), not F + (1 − F)/η² (measured, bpy 5.0)."""
+    above with light from below, a white furnace shows F + (1 − F), not F + (1 − F)/η² (measured, bpy 5.0).
+    SpongeCake's reference substrate is a half-space with that 1/η² [approx: dielectric-substrate-adjoint];
+    micrograin's dielectric bulk is a glass as renderers see it, like this."""
     return np.repeat(microfacet.dielectric_eval(wo, wi, alpha, ior)[:, None], 3, axis=1)
 
 

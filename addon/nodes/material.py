@@ -261,7 +261,9 @@ def ms_enabled(mat) -> bool:
 def ms_is_stale(mat) -> bool:
     """Whether the parameters changed since the multiple-scattering inputs were last baked."""
     model_id, p = current_params(mat)
-    return getattr(p, "multiple_scattering", False) and shader_node(mat) is not None and mat.get(MS_KEY) != ms_key(model_id, p)
+    if not getattr(p, "multiple_scattering", False) or shader_node(mat) is None:
+        return False
+    return mat.get(MS_KEY) != ms_key(model_id, p)
 
 
 def ms_energy_share(mat) -> float:

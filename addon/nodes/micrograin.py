@@ -4,18 +4,21 @@ The node takes the material under the grains as a Shader input (``Bulk``), so it
 the grains' BRDF f_S and the bulk's f_B with the weight w⁺(i, o) of Eq. 24, whose complement factorises as
 1 − w⁺ = g(θi) g(θo), g = sqrt(1 − τβ) (research notes §3). A closure weight cannot depend on the light, so
 g(θi) is taken at the mirror configuration θi = θo: the bulk gets 1 − τβ(θo) and the grains τβ(θo), exact at
-the specular configuration. [approx: view-only-weight] Seen from below the surface (the inner side of a glass's
-far face, where Cycles flips the normal towards the viewer) the layer is its bulk, as in the reference. The bulk's transmission (glass) gets that weight too,
-where the reference has g(θo) ḡ (ḡ the hemispherical mean of g; ``reference.micrograin``). [approx: bulk-transmission-weight]
+the specular configuration (docs/accuracy.md compares it with the hemispherical mean). [approx: view-only-weight]
+The bulk's transmission (glass) gets that weight too, where the reference has g(θo) ḡ (ḡ the hemispherical mean
+of g). [approx: bulk-transmission-weight] Seen from below the surface (the inner side of a glass's far face,
+where Cycles flips the normal towards the viewer) the layer is its bulk, as in the reference.
 
 The grains' specular lobe is Cycles' GGX with the equivalent roughness α̃ of Eq. 18, whose D equals the
 micrograin D (Eq. 17) at h = n, i.e. at every mirror configuration. [approx: grains-as-ggx] With the
-series GAF (Eq. 25) the lobe is scaled by G_micrograin / G_GGX(α̃) at the mirror configuration
-(1 + 2Λ_GGX) / (1 + 2Λ), so the lobe is exact there; Λ is evaluated in float32 without cancellation
-(``_micrograin_lambda``). [approx: gaf-at-mirror] The specular Fresnel is exact per microfacet: a conductor
-closure, with k = 0 for dielectric grains (the complex Fresnel then equals the dielectric one). The diffuse
-part of dielectric grains is weighted by T̄(i, o) = t(θi) t(θo) taken at the mirror configuration, t = 1 − E_spec
-with the specular lobe's albedo E_spec fitted (``ALBEDO_FIT``) where the reference tabulates it. [approx: grain-transmittance-fit]
+series GAF (Eq. 25) the lobe is scaled by G_micrograin / G_GGX(α̃) at the mirror configuration,
+(1 + 2Λ_GGX) / (1 + 2Λ), with Λ evaluated in float32 without cancellation (``_micrograin_lambda``).
+[approx: gaf-at-mirror] The specular Fresnel is exact per microfacet: a conductor closure, with k = 0 for
+dielectric grains (the complex Fresnel then equals the dielectric one). So over a reflecting bulk, diffuse and
+conductor grains are exact at every mirror configuration (Blender 5.0; 4.2's node group and conductor Fresnel
+are approximate). The diffuse part of dielectric grains is weighted by T̄(i, o) = t(θi) t(θo) taken at the
+mirror configuration, t = 1 − E_spec, with the specular lobe's albedo E_spec fitted (``ALBEDO_FIT``) where the
+reference tabulates it. [approx: grain-transmittance-fit]
 """
 from __future__ import annotations
 
@@ -156,7 +159,8 @@ def _fresnel_dielectric(b, c, eta):
 
 
 def _gaf_ratio(b, mu, tau0, beta, alpha):
-    """G_micrograin / G_GGX(α̃) at the mirror configuration: (1 + 2 Λ_GGX(θo)) / (1 + 2 Λ(θo))."""
+    """G_micrograin / G_GGX(α̃) at the mirror configuration, where the height-correlated G2 = 1 / (1 + Λi + Λo)
+    (Heitz 2014, Eq. 99) is 1 / (1 + 2 Λ(θo)): (1 + 2 Λ_GGX(θo)) / (1 + 2 Λ(θo))."""
     tan2 = (1.0 - mu * mu) / (mu * mu)
     lambda_ggx = 0.5 * (b.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
     return (1.0 + 2.0 * lambda_ggx) / (1.0 + 2.0 * _micrograin_lambda(b, mu, tau0, beta))

@@ -86,6 +86,10 @@ APPROXIMATIONS = {
                                 "complex IOR's F0; not measured here (bpy 5.0)",
                                 {**_one(type="surface", roughness=0.3, thickness=0.1),
                                  "substrate": {"type": "conductor"}}),
+    "dielectric-substrate-adjoint": ("Cycles' glass transmits light from inside the substrate without the 1/η² of "
+                                    "the reference's half-space (Cycles evaluates the adjoint BSDF)",
+                                    {**_one(type="surface", roughness=0.3, thickness=0.3),
+                                     "substrate": {"type": "dielectric", "roughness": 0.3, "ior": 1.5}}),
     "schlick-at-view": ("Schlick F at h = flake normal, not per microfacet (node group reflection; both forms' "
                         "transmission)",
                         _one(type="surface", roughness=0.3, thickness=1e4, f0=[0.2, 0.2, 0.2])),

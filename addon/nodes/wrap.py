@@ -29,11 +29,15 @@ def surface_input(mat):
     return None if out is None else out.inputs["Surface"]
 
 
+def has_porous_layer(mat) -> bool:
+    return lamina_material.is_lamina(mat) and lamina_material.info(mat).get("model") == model.ID
+
+
 def refusal(mat) -> str | None:
     """Why ``mat`` cannot get a porous layer (one line), or None when it can."""
     if mat is None:
         return "no active material to add a porous layer to"
-    if lamina_material.is_lamina(mat) and lamina_material.info(mat).get("model") == model.ID:
+    if has_porous_layer(mat):
         return f"{mat.name} already has a porous layer; edit its Filling Factor on the Lamina node"
     surface = surface_input(mat)
     if surface is None:

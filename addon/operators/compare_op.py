@@ -73,7 +73,8 @@ class LAMINA_OT_compare(bpy.types.Operator):
 
     @staticmethod
     def _multiple_scattering(context, model_id: str) -> bool:
-        return context.window_manager.lamina_compare.multiple_scattering and compare_run.has_multiple_scattering(model_id)
+        wanted = context.window_manager.lamina_compare.multiple_scattering
+        return wanted and compare_run.has_multiple_scattering(model_id)
 
     def invoke(self, context, event):
         refusal = self._refusal(context)

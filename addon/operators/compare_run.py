@@ -255,7 +255,8 @@ def scene_lines(entries: dict) -> list[str]:
         if "ms" in e:
             lines.append("  " + ms_line(e["ms"]))
         if "blends" in e:
-            lines.append("  other blends vs ours: " + ", ".join(f"{b} {d:.2%}" for b, d in e["blends"]["vs_ours"].items()))
+            others = e["blends"]["vs_ours"].items()
+            lines.append("  other blends vs ours: " + ", ".join(f"{b} {d:.2%}" for b, d in others))
     return lines
 
 

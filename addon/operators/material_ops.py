@@ -150,12 +150,10 @@ ROUGHNESS_ITEMS = [
      "Set the GGX roughness the grains look like (α̃ of Eq. 18); Lamina derives the anfractuosity at this filling "
      "factor, so the highlight keeps its sharpness when the filling factor changes"),
 ]
-GRAIN_ITEMS = [
-    ("diffuse", "Diffuse", "Matte (Lambertian) grains: dust, dirt, mud"),
-    ("dielectric", "Diffuse + specular", "Matte grains under a specular dielectric coat: glossy dust, paint"),
-    ("conductor", "Conductor", "Specular grains with a complex IOR: rust, metallic spray paint, soot"),
-]
-GRAIN_LABELS = {key: label for key, label, _ in GRAIN_ITEMS}
+GRAIN_ITEMS = [(key, micrograin.GRAIN_LABELS[key], description) for key, description in (
+    ("diffuse", "Matte (Lambertian) grains: dust, dirt, mud"),
+    ("dielectric", "Matte grains under a specular dielectric coat: glossy dust, paint"),
+    ("conductor", "Specular grains with a complex IOR: rust, metallic spray paint, soot"))]
 CONDUCTOR_ITEMS = [(k, k.replace("_", " ").capitalize(), f"Grains of {k.replace('_', ' ')} (complex IOR, RGB)")
                    for k in micrograin.CONDUCTORS] + [(CUSTOM, "Custom", "Set the complex IOR (n, k) below")]
 _GOLD = micrograin.CONDUCTORS["gold"]
@@ -212,7 +210,7 @@ class LAMINA_OT_add_porous_layer(bpy.types.Operator):
         if mat is None:
             cls.poll_message_set("The active object has no active material")
             return False
-        if lamina_material.is_lamina(mat) and lamina_material.info(mat).get("model") == micrograin.ID:
+        if wrap.has_porous_layer(mat):
             cls.poll_message_set("Already has a porous layer: edit its Filling Factor on the Lamina node")
             return False
         return True
@@ -227,7 +225,8 @@ class LAMINA_OT_add_porous_layer(bpy.types.Operator):
             p = micrograin.params_from_dict({**self.layer_dict(), "bulk": {"type": micrograin.WRAPPED}})
             col = layout.column(align=True)
             col.label(text=presets.description(micrograin.ID, self.preset), icon="INFO")
-            col.label(text=f"Grains: {GRAIN_LABELS[p.grain.type].lower()}; filling factor {p.filling_factor:.2f}; "
+            grains = micrograin.GRAIN_LABELS[p.grain.type].lower()
+            col.label(text=f"Grains: {grains}; filling factor {p.filling_factor:.2f}; "
                            f"anfractuosity β {p.anfractuosity:.2f} (α {p.roughness:.3f})")
             col.label(text="Your material is the bulk; edit the values on the Lamina node afterwards")
         else:

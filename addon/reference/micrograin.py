@@ -21,9 +21,15 @@ lobe, tabulated per parameter set on 64 cosines (cached) and interpolated linear
 ``roughplastic``). Diffuse grains have T̄ = 1 and no specular lobe; conductor grains no diffuse part.
 
 Our choices where the paper is silent: light crosses the layer into a transmitting bulk (a dielectric or a
-SpongeCake stack without substrate) only through the pores it sees from the side above: f_B (1 − τ⁺(θ)) with
-θ that direction's angle, and no grain term; with both directions below, f = f_B. A model bulk's Dirac
-(SpongeCake's delta transmission) is not part of ``eval`` or ``pdf``, and ``sample`` gives it weight 0.
+SpongeCake stack without substrate) through the pores, with no grain term: f_B g(θ) ḡ, θ the angle of the
+direction above, g = sqrt(1 − τβ) and ḡ its cosine-weighted mean (``_pore_transmittance``: the pores it sees,
+1 − τ⁺, would count twice the pores that w⁺ gives to the grains); with both directions below, f = f_B. A
+dielectric bulk is a glass as renderers see it (``_bulk_eval``). A model bulk's Dirac (SpongeCake's delta
+transmission) is in ``furnace_albedo`` only: ``eval`` and ``pdf`` leave it out and ``sample`` gives it weight 0.
+
+Eq. 1 itself is not energy-conserving over glossy bulks: w⁺ gives the grains light that the bulk's mirror lobe
+also reflects, so white Lambertian grains over a white near-mirror bulk return up to about 9% more than they
+receive at normal incidence (measured: tests/unit/test_micrograin_reference.py).
 """
 from __future__ import annotations
 
@@ -288,7 +294,8 @@ def smith_lambda_float32(cos_theta, tau0, beta):
     Measured against ``smith_lambda`` for θ <= 89°, τ0 in [0, 0.98], β in [1e-3, 1]: the scheme itself (run
     in float64) is within 1e-5 relative; in float32 the rounding of cos θ dominates, absolute error below
     1.1e-4 (Λ reaches 10.6 at 89°; at small θ, where cos θ rounds to 1, Λ is below 1e-6). Only
-    + − × ÷, abs, sqrt, exp, log, max and a select, with fixed loop counts: the Cycles mapping (nodes/micrograin.py) runs the same
+    + − × ÷, abs, sqrt, exp, log, max and a select, with fixed loop counts: the Cycles mapping
+    (nodes/micrograin.py) runs the same
     ``lambda_scheme`` on its OSL and node-group backends.
     """
     c = np.abs(cos_theta)
@@ -668,5 +675,16 @@ def directional_albedo(params: Params, wo, n: int = 16384, seed: int = 0, blend=
 
 
 def furnace_albedo(params: Params, wo, n: int = 4096, seed: int = 0, blend="ours"):
-    """What a white furnace returns towards wo (N, 3): the directional albedo (no Dirac part is modelled)."""
-    return directional_albedo(params, wo, n=n, seed=seed, blend=blend)
+    """What a white furnace returns towards wo (N, 3): the directional albedo plus a model bulk's straight-through
+    Dirac (SpongeCake's delta transmission), passing the layer like the bulk's other transmission
+    (``_pore_transmittance``). ``sample`` and ``pdf`` leave the Dirac out."""
+    wo = as_directions(wo)
+    albedo = directional_albedo(params, wo, n=n, seed=seed, blend=blend)
+    model = _bulk_model(params.bulk) if params.bulk.type not in SIMPLE_BULKS else None
+    if model is None or not hasattr(model, "delta_transmittance"):
+        return albedo
+    delta = model.delta_transmittance(params.bulk.params, wo)
+    up = wo[:, 2] > 0
+    if up.any():
+        delta[up] = delta[up] * _pore_transmittance(params, wo[up], blend)[:, None]
+    return albedo + delta

@@ -58,7 +58,8 @@ def _first_hits(tau0: float, beta: float, cos_theta: float, n: int, rng: np.rand
     mean = density(tau0) * 2.0 * (length + 2.0)  # rho |B|
     cap = poisson_cap(mean)
     counts = rng.poisson(mean, n)
-    assert counts.max(initial=0) <= cap, "Poisson count above the padding cap"
+    if counts.max(initial=0) > cap:
+        raise RuntimeError("a Poisson grain count exceeded the padding cap (probability < 1e-15 per ray)")
     cx = rng.uniform(-1.0, length + 1.0, (n, cap))
     cy = rng.uniform(-1.0, 1.0, (n, cap))
     present = np.arange(cap) < counts[:, None]

@@ -5,6 +5,8 @@ import bpy
 
 from ..models import MODELS, micrograin
 from ..nodes import material as lamina_material
+from ..nodes import wrap
+from ..operators import compare_run
 
 
 class LAMINA_PT_main(bpy.types.Panel):
@@ -24,7 +26,7 @@ class LAMINA_PT_main(bpy.types.Panel):
         col = layout.column(align=True)
         col.operator("lamina.add_spongecake", icon="MATERIAL")
         row = col.row(align=True)
-        row.enabled = mat is not None and not _is_micrograin(mat)  # what the operator's poll says, but visible
+        row.enabled = mat is not None and not wrap.has_porous_layer(mat)  # what the operator's poll says, but visible
         row.operator("lamina.add_porous_layer", icon="MOD_PARTICLES")
         if not lamina_material.is_lamina(mat):
             layout.label(text="The active material is not a Lamina material", icon="INFO")
@@ -51,13 +53,6 @@ class LAMINA_PT_main(bpy.types.Panel):
             _draw_multiple_scattering(layout.box(), context, mat)
 
 
-def _is_micrograin(mat) -> bool:
-    return lamina_material.is_lamina(mat) and lamina_material.info(mat).get("model") == micrograin.ID
-
-
-GRAIN_LABELS = {"diffuse": "diffuse", "dielectric": "diffuse + specular dielectric", "conductor": "conductor"}
-
-
 def _linked(node, name: str) -> bool:
     socket = node.inputs.get(name) or node.inputs.get(name.replace(" ", "_"))  # node group / OSL names
     return socket is not None and socket.is_linked
@@ -75,7 +70,7 @@ def _draw_micrograin(box, mat) -> None:
     if node is None:
         box.label(text="The Lamina node was removed: showing the stored values", icon="ERROR")
     col = box.column(align=True)
-    grain = GRAIN_LABELS[p.grain.type]
+    grain = micrograin.GRAIN_LABELS[p.grain.type].lower()
     if p.grain.type == "dielectric":
         grain += f" (IOR {p.grain.ior:.2f})"
     col.label(text=f"Grains: {grain}")
@@ -135,7 +130,7 @@ class LAMINA_PT_compare(bpy.types.Panel):
         settings = context.window_manager.lamina_compare
         mat = context.material
         info = lamina_material.info(mat)
-        wrapped = info["model"] == micrograin.ID and info["params"].get("bulk", {}).get("type") == micrograin.WRAPPED
+        wrapped = compare_run.refusal(*lamina_material.current_params(mat)) is not None
         if wrapped:
             layout.label(text="Comparison needs a reference bulk: this porous", icon="INFO")
             layout.label(text="layer wraps the material's own shader")

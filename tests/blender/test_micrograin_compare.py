@@ -75,7 +75,7 @@ def test_cli_compare_micrograin_and_its_refusals(tmp_path):
     (tmp_path / "wrapped.json").write_text(json.dumps({"bulk": {"type": "shader"}}))
     refused = cli("compare", "--model", "micrograin", "--params", str(tmp_path / "wrapped.json"), "--out",
                   str(tmp_path / "no"))
-    assert refused.returncode != 0 and "no reference" in refused.stderr and not (tmp_path / "no").exists()
+    assert refused.returncode == 2 and "no reference" in refused.stderr and not (tmp_path / "no").exists()
     refused = cli("compare", "--preset", "fabric", "--blends", "--out", str(tmp_path / "no"))
-    assert refused.returncode != 0 and "single blending weight" in refused.stderr
+    assert refused.returncode == 2 and "single blending weight" in refused.stderr
     assert np.isfinite(report["forms"]["osl"]["sphere"]["rel_rmse"])

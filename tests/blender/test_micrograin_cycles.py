@@ -86,7 +86,8 @@ EXTREMES = {
 def test_extremes_render_finite_non_negative_pixels(case, form, tmp_path):
     p = model.params_from_dict(EXTREMES[case])
     mat = material.new_material(model.ID, p, form)
-    for spec in (S.sphere_scene(resolution=24), S.plane_scene(resolution=(24, 12)), S.furnace_scene(resolution=(16, 8))):
+    scenes = (S.sphere_scene(resolution=24), S.plane_scene(resolution=(24, 12)), S.furnace_scene(resolution=(16, 8)))
+    for spec in scenes:
         img = _render(mat, spec, 16, tmp_path)
         assert np.isfinite(img).all() and (img >= 0).all(), f"{case} {form} {spec.name}"
 
@@ -95,7 +96,8 @@ def test_extremes_render_finite_non_negative_pixels(case, form, tmp_path):
 def test_a_texture_drives_the_filling_factor(form, tmp_path):
     """A mask plugged into Filling Factor (here: object x > 0) renders each half as the constant it holds."""
     low, high = 0.1, 0.9
-    base = {"grain": {"type": "diffuse", "albedo": [0.9, 0.8, 0.6]}, "bulk": {"type": "diffuse", "albedo": [0.1, 0.1, 0.3]}}
+    base = {"grain": {"type": "diffuse", "albedo": [0.9, 0.8, 0.6]},
+            "bulk": {"type": "diffuse", "albedo": [0.1, 0.1, 0.3]}}
     p = model.params_from_dict({**base, "filling_factor": low})
     mat = material.new_material(model.ID, p, form)
     tree = mat.node_tree
