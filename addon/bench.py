@@ -69,7 +69,10 @@ def ground_truth_error(p, n_dirs: int = 4, n_paths: int = 20000, seed: int = 1) 
     return float(np.abs(analytic - single).mean() / np.abs(single).mean())
 
 
-def reference_throughput(p, n: int = 200_000, repeats: int = 3) -> float:
+def reference_throughput(p, n: int = 200_000, repeats: int = 3, model_id: str = MODEL) -> float:
+    """Reference ``eval`` calls per second on random direction pairs (fastest of ``repeats``; the first call also
+    warms caches such as micrograin's specular albedo table)."""
+    ref_model = importlib.import_module(f".reference.{model_id}", __package__)
     rng = np.random.default_rng(0)
 
     def dirs():
@@ -78,11 +81,12 @@ def reference_throughput(p, n: int = 200_000, repeats: int = 3) -> float:
         return v
 
     wi, wo = dirs(), dirs()
-    best = min(_timed(lambda: reference.eval(p, wi, wo)) for _ in range(repeats))
+    ref_model.eval(p, wi[:10], wo[:10])
+    best = min(timed(lambda: ref_model.eval(p, wi, wo)) for _ in range(repeats))
     return n / best
 
 
-def _timed(fn) -> float:
+def timed(fn) -> float:
     t = time.perf_counter()
     fn()
     return time.perf_counter() - t
@@ -135,7 +139,7 @@ def principled_like(p):
 # ------------------------------------------------------------------------------------------------ docs
 
 
-def _pct(x: float) -> str:
+def pct(x: float) -> str:
     return f"{100 * x:.1f}%" if np.isfinite(x) else "n/a"
 
 
@@ -156,7 +160,7 @@ def accuracy_markdown(resolution: int) -> str:
         errs = mapping_errors(p, resolution)
         for scene in ACCURACY_SCENES:
             lines.append(f"| {name} | {what} | `{_short(config)}` | {scene} | {errs['mean'][scene]:.4f} | "
-                         f"{_pct(errs['osl'][scene])} | {_pct(errs['nodes'][scene])} |")
+                         f"{pct(errs['osl'][scene])} | {pct(errs['nodes'][scene])} |")
     lines += ["", "## Presets", "",
               "Reference vs ground truth: mean relative error of the analytic single scattering against the "
               "order-1 part of an independent random walk (4×4 × 4×4 direction pairs, 20 000 paths each).", "",
@@ -166,9 +170,9 @@ def accuracy_markdown(resolution: int) -> str:
         p = model.params_from_dict(presets.load(MODEL, name))
         errs = mapping_errors(p, resolution)
         for scene in ACCURACY_SCENES:
-            lines.append(f"| {name} | {scene} | {errs['mean'][scene]:.4f} | {_pct(errs['osl'][scene])} | "
-                         f"{_pct(errs['nodes'][scene])} |")
-        gt_rows.append(f"| {name} | {_pct(ground_truth_error(p))} |")
+            lines.append(f"| {name} | {scene} | {errs['mean'][scene]:.4f} | {pct(errs['osl'][scene])} | "
+                         f"{pct(errs['nodes'][scene])} |")
+        gt_rows.append(f"| {name} | {pct(ground_truth_error(p))} |")
     lines += ["", "| preset | reference vs ground truth (single scattering) |", "|---|---|", *gt_rows, ""]
     return "\n".join(lines)
 
@@ -236,8 +240,8 @@ def sheen_alternative(samples: int, resolution: int) -> str:
                 k = sum((i[m] * r[m]).sum() for i, r, m in zip(imgs, refs, masks)) / \
                     sum((i[m] ** 2).sum() for i, m in zip(imgs, masks))
                 errs = [metrics.rel_rmse(k * i, r, m) for i, r, m in zip(imgs, refs, masks)]
-                lines.append(f"| Tρ = {thickness} | {roughness} | {k:.3f} | {_pct(errs[0])} | {_pct(errs[1])} | "
-                             f"{_pct(ours[0])} | {_pct(ours[1])} |")
+                lines.append(f"| Tρ = {thickness} | {roughness} | {k:.3f} | {pct(errs[0])} | {pct(errs[1])} | "
+                             f"{pct(ours[0])} | {pct(ours[1])} |")
         finally:
             blend_io.remove_new_data(before)
     return "\n".join(lines) + "\n"
@@ -497,13 +501,13 @@ def bake_throughput(size: int) -> tuple[str, float]:
         inputs = {(0, "albedo"): rng.uniform(0.2, 0.9, (size, size, 3)),
                   (0, "roughness"): rng.uniform(0.05, 0.5, (size, size)),
                   (1, "thickness"): rng.uniform(1.0, 8.0, (size, size))}
-        seconds = min(_timed(lambda: textures.bake_maps(p, inputs)) for _ in range(2))
+        seconds = min(timed(lambda: textures.bake_maps(p, inputs)) for _ in range(2))
         what = (f"`bake.textures.bake_maps`, 2-layer fabric, synthetic {size}×{size} textures on three inputs, "
                 "network inference and packing into RGBA maps, no file I/O")
     else:
         rows = np.repeat(layer_rows.stack_rows(p)[None], size * size, axis=0)
         rows[:, :, layer_rows.ROUGHNESS] *= rng.uniform(0.5, 1.0, (size * size, 1))  # texels differ
-        seconds = min(_timed(lambda: ms.predict_rows(rows)) for _ in range(2))
+        seconds = min(timed(lambda: ms.predict_rows(rows)) for _ in range(2))
         what = (f"core inference `bake.spongecake.predict_rows` (network + decode), 2-layer fabric, {size}×{size} "
                 "texels (`bake.textures` not available)")
     return what, seconds / (size * size / 1e6)
@@ -554,9 +558,9 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
                   "|---|---|---|---|---|---|---|---|"]
         for n, v in val.items():
             lines.append(f"| {n} | {v['configs']} | {v['n_wi']}×{v['n_wo']} × {v['paths']} | "
-                         f"{_pct(v['mean_relative_lobe_error'])} | {_pct(v['median_relative_lobe_error'])} | "
-                         f"{_pct(v['worst_relative_lobe_error'])} | {_pct(v['mean_relative_energy_error'])} | "
-                         f"{_pct(v['mean_monte_carlo_noise'])} |")
+                         f"{pct(v['mean_relative_lobe_error'])} | {pct(v['median_relative_lobe_error'])} | "
+                         f"{pct(v['worst_relative_lobe_error'])} | {pct(v['mean_relative_energy_error'])} | "
+                         f"{pct(v['mean_monte_carlo_noise'])} |")
     else:
         lines.append("Not measured: the validation set is missing (`make validation-set`).")
     # --- failure case
@@ -568,8 +572,8 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               f"{sizes.failure_paths} paths per wi).", "",
               "| configuration | lobe error | energy error | Monte Carlo noise |", "|---|---|---|---|"]
     for r in fail:
-        lines.append(f"| {r['label']} | {_pct(r['mean_relative_lobe_error'])} | "
-                     f"{_pct(r['mean_relative_energy_error'])} | {_pct(r['mean_monte_carlo_noise'])} |")
+        lines.append(f"| {r['label']} | {pct(r['mean_relative_lobe_error'])} | "
+                     f"{pct(r['mean_relative_energy_error'])} | {pct(r['mean_monte_carlo_noise'])} |")
     # --- white furnace
     rows = white_furnace(sizes)
     summ = {"all": furnace_summary(rows)}
@@ -583,7 +587,7 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               f"[0.1, 10]), each seen from θo = {', '.join(f'{t:g}°' for t in FURNACE_THETAS)}. The energy returned "
               "counts the unscattered light (the Dirac part), so the exact answer is 1. SS + MS: the model's "
               f"directional albedo with the network ({sizes.furnace_samples} samples per direction; its own noise, "
-              f"from two halves: {_pct(summ['all']['ss_ms']['noise'])} RMS) plus the unscattered light; "
+              f"from two halves: {pct(summ['all']['ss_ms']['noise'])} RMS) plus the unscattered light; "
               f"Monte Carlo: the random walk's total ({sizes.furnace_paths} paths; short of 1 only by truncation "
               "at 64 orders, since every path keeps weight 1). Goal for SS + MS: mean |1 − a| ≤ 5%, worst ≤ 15%.",
               "",
@@ -591,14 +595,14 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "\\|1 − a\\| | worst | Monte Carlo mean \\|1 − a\\| |",
               "|---|---|---|---|---|---|---|---|"]
     for label, sm in summ.items():
-        lines.append(f"| {label} | {_pct(sm['ss_ms']['mean_vs_1'])} | {_pct(sm['ss_ms']['worst_vs_1'])} | "
-                     f"{_pct(sm['ss_ms']['mean_vs_truth'])} | {_pct(sm['ss_ms']['worst_vs_truth'])} | "
-                     f"{_pct(sm['ss']['mean_vs_1'])} | {_pct(sm['ss']['worst_vs_1'])} | "
-                     f"{_pct(sm['truth']['mean_vs_1'])} |")
+        lines.append(f"| {label} | {pct(sm['ss_ms']['mean_vs_1'])} | {pct(sm['ss_ms']['worst_vs_1'])} | "
+                     f"{pct(sm['ss_ms']['mean_vs_truth'])} | {pct(sm['ss_ms']['worst_vs_truth'])} | "
+                     f"{pct(sm['ss']['mean_vs_1'])} | {pct(sm['ss']['worst_vs_1'])} | "
+                     f"{pct(sm['truth']['mean_vs_1'])} |")
     worst_view = max(rows, key=lambda r: r["ss_ms"])
-    lines += ["", f"Goal {'met' if met else '**not met**'} (mean {_pct(summ['all']['ss_ms']['mean_vs_1'])}, worst "
-              f"{_pct(summ['all']['ss_ms']['worst_vs_1'])}). Energy gain: SS + MS returns more than 1.01 in "
-              f"{_pct(summ['all']['ss_ms']['gain_share'])} of the (stack, view) cases, at most "
+    lines += ["", f"Goal {'met' if met else '**not met**'} (mean {pct(summ['all']['ss_ms']['mean_vs_1'])}, worst "
+              f"{pct(summ['all']['ss_ms']['worst_vs_1'])}). Energy gain: SS + MS returns more than 1.01 in "
+              f"{pct(summ['all']['ss_ms']['gain_share'])} of the (stack, view) cases, at most "
               f"{summ['all']['ss_ms']['max']:.2f} ({worst_view['layers']}-layer stack seen at θo = "
               f"{worst_view['theta']:.0f}°): the extra single-scattering lobe's albedo grows towards grazing views "
               "like single scattering does, and nothing in the network bounds the sum by 1 there."]
@@ -619,9 +623,9 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
     for name in sizes.presets:
         for scene, forms in rendered_ms_errors(name, sizes, samples, resolution).items():
             n, o = forms["nodes"], forms["osl"]
-            lines.append(f"| {name} | {scene} | {_pct(n['ms_share'])} | {_pct(n['single_vs_truth'])} | "
-                         f"{_pct(n['network_vs_truth'])} | {_pct(n['cycles_vs_truth'])} | {_pct(o['cycles_vs_truth'])} | "
-                         f"{_pct(n['truth_noise'])} | {_pct(n['cycles_vs_network'])} | {_pct(o['cycles_vs_network'])} |")
+            lines.append(f"| {name} | {scene} | {pct(n['ms_share'])} | {pct(n['single_vs_truth'])} | "
+                         f"{pct(n['network_vs_truth'])} | {pct(n['cycles_vs_truth'])} | {pct(o['cycles_vs_truth'])} | "
+                         f"{pct(n['truth_noise'])} | {pct(n['cycles_vs_network'])} | {pct(o['cycles_vs_network'])} |")
     return "\n".join(lines) + "\n"
 
 

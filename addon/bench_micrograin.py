@@ -15,7 +15,7 @@ import os
 import numpy as np
 
 from . import presets
-from .bench import ACCURACY_SCENES, _pct, _timed, mapping_errors
+from .bench import ACCURACY_SCENES, mapping_errors, pct, reference_throughput
 from .models import micrograin as model
 from .nodes import micrograin as mapping
 from .reference import micrograin as reference
@@ -83,8 +83,8 @@ def grain_albedo_fit() -> dict:
             for eta in (1.3, 1.5, 2.0, 2.5):
                 exact = reference.specular_albedo(mu, tau0, beta, eta)
                 alpha = np.full_like(mu, model.equivalent_roughness(tau0, beta))
-                fit = mapping._specular_albedo(b, mu, np.full_like(mu, eta), alpha)
-                fresnel = mapping._fresnel_dielectric(b, mu, np.full_like(mu, eta))
+                fit = mapping.specular_albedo_fit(b, mu, np.full_like(mu, eta), alpha)
+                fresnel = mapping.fresnel_dielectric(b, mu, np.full_like(mu, eta))
                 worst["fit"] = max(worst["fit"], float(np.abs(fit - exact).max()))
                 worst["fresnel"] = max(worst["fresnel"], float(np.abs(fresnel - exact).max()))
     return worst
@@ -187,13 +187,13 @@ def accuracy_markdown(resolution: int) -> str:
         errs = mapping_errors(model.params_from_dict(config), resolution, MODEL)
         for scene in ACCURACY_SCENES:
             lines.append(f"| {name} | {what} | `{_short(config)}` | {scene} | {errs['mean'][scene]:.4f} | "
-                         f"{_pct(errs['osl'][scene])} | {_pct(errs['nodes'][scene])} |")
+                         f"{pct(errs['osl'][scene])} | {pct(errs['nodes'][scene])} |")
     lines += ["", "## Presets", "", "| preset | scene | ref. mean | OSL | node group |", "|---|---|---|---|---|"]
     for name in presets.names(MODEL):
         errs = mapping_errors(model.params_from_dict(presets.load(MODEL, name)), resolution, MODEL)
         for scene in ACCURACY_SCENES:
-            lines.append(f"| {name} | {scene} | {errs['mean'][scene]:.4f} | {_pct(errs['osl'][scene])} | "
-                         f"{_pct(errs['nodes'][scene])} |")
+            lines.append(f"| {name} | {scene} | {errs['mean'][scene]:.4f} | {pct(errs['osl'][scene])} | "
+                         f"{pct(errs['nodes'][scene])} |")
     lines += ["", "## The view-only stand-in for w⁺", "",
               "w⁺ = 1 − g(θi) g(θo) needs the light direction, which a closure weight cannot see. Candidates for "
               "g(θi), each alone (everything else exact): the mirror configuration g(θo), which the Cycles forms "
@@ -202,13 +202,13 @@ def accuracy_markdown(resolution: int) -> str:
               "| preset | bulk | scene | mirror g(θo) | mean ḡ |", "|---|---|---|---|---|"]
     for r in view_weight_alternatives(resolution):
         bulk = model.params_from_dict(presets.load(MODEL, r["preset"])).bulk.type
-        lines.append(f"| {r['preset']} | {bulk} | {r['scene']} | {_pct(r['mirror'])} | {_pct(r['average'])} |")
+        lines.append(f"| {r['preset']} | {bulk} | {r['scene']} | {pct(r['mirror'])} | {pct(r['average'])} |")
     lines += ["", "## Other blending weights against ours (the paper's Fig. 14 and Eq. 26)", "",
               "Relative RMSE of the reference with the linear mix by τ0 and with d'Eon et al.'s weighting "
               "(w_A = τ0, our reading of Eq. 26) against the reference with w⁺: what `lamina compare --blends` "
               "shows side by side.", "", "| preset | scene | linear mix | d'Eon |", "|---|---|---|---|"]
     for r in blend_differences(resolution):
-        lines.append(f"| {r['preset']} | {r['scene']} | {_pct(r['linear'])} | {_pct(r['deon'])} |")
+        lines.append(f"| {r['preset']} | {r['scene']} | {pct(r['linear'])} | {pct(r['deon'])} |")
     return "\n".join(lines) + "\n"
 
 
@@ -261,7 +261,7 @@ def _plug_principled(mat) -> None:
 
 
 def speed_markdown(samples: int, resolution: int) -> str:
-    rate = reference_throughput()
+    rate = reference_throughput(model.params_from_dict(presets.load(MODEL, "rust_on_metal")), model_id=MODEL)
     rows = render_times(samples, resolution)
     lines = ["", "## Micrograin porous layer", "",
              f"Reference `micrograin.eval`, rust_on_metal (conductor grains over a rough metal), float64: "
@@ -276,11 +276,3 @@ def speed_markdown(samples: int, resolution: int) -> str:
         lines.append(f"| {r['preset']} | {base:.2f} | " + " | ".join(
             f"{r[k] / base:.2f}" for k in ("nodes series", "nodes ggx", "osl series", "osl ggx")) + " |")
     return "\n".join(lines) + "\n"
-
-
-def reference_throughput(n: int = 200_000, repeats: int = 3) -> float:
-    p = model.params_from_dict(presets.load(MODEL, "rust_on_metal"))
-    rng = np.random.default_rng(0)
-    wi, wo = (v / np.linalg.norm(v, axis=1, keepdims=True) for v in (rng.normal(size=(n, 3)) for _ in range(2)))
-    reference.eval(p, wi[:10], wo[:10])  # fills the specular albedo table
-    return n / min(_timed(lambda: reference.eval(p, wi, wo)) for _ in range(repeats))

@@ -218,6 +218,14 @@ def _read_bulk(d, warnings: list[str]) -> Bulk:
     return Bulk(d["type"], validated.params)
 
 
+def reference_refusal(p: Params) -> str | None:
+    """Why ``p`` has no reference to compare with (None: it has one): a layer over a material's own shader."""
+    if p.bulk.type == WRAPPED:
+        return ("this porous layer wraps a material's own shader, which has no reference; compare a porous layer "
+                "over a reference bulk (diffuse, conductor, dielectric or another Lamina model)")
+    return None
+
+
 def default_params() -> Params:
     return params_from_dict({})
 

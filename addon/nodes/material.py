@@ -338,7 +338,9 @@ BULK_NODE = "Lamina Bulk"
 
 
 def _has_reference_bulk(model_id: str, p) -> bool:
-    return hasattr(MAPPINGS[model_id], "bulk_shader") and p.bulk.type != WRAPPED
+    """Whether ``p`` wraps a reference bulk that Lamina builds (the mapping's ``bulk_shader``)."""
+    bulk_shader = getattr(MAPPINGS[model_id], "bulk_shader", None)
+    return bulk_shader is not None and bulk_shader(p) is not None
 
 
 def _user_bulk(layer) -> bool:

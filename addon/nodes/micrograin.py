@@ -90,10 +90,10 @@ def with_values(p: model.Params, values: dict) -> model.Params:
     return model.params_from_dict(data)
 
 
-def bulk_shader(p: model.Params) -> tuple[str, object]:
-    """The mapping id and parameters of what renders the reference bulk (raises for a wrapped shader)."""
+def bulk_shader(p: model.Params) -> tuple[str, object] | None:
+    """The mapping id and parameters of what renders the reference bulk; None for a wrapped shader."""
     if p.bulk.type == model.WRAPPED:
-        raise ValueError("this porous layer wraps a material's own shader, which has no reference to predict")
+        return None
     return ("bulk" if p.bulk.type in model.SIMPLE_BULKS else p.bulk.type), p.bulk.params
 
 
@@ -101,8 +101,10 @@ def numpy_bulk(p: model.Params, form: str):
     """``wo -> NumpyBackend`` holding what the bulk renders as (the Cycles form of a reference bulk)."""
     from . import _backend
 
-    mapping_id, params = bulk_shader(p)
-    return lambda wo: _backend(mapping_id, params, form, wo)
+    shader = bulk_shader(p)
+    if shader is None:
+        raise ValueError(model.reference_refusal(p))
+    return lambda wo: _backend(*shader, form, wo)
 
 
 def shade(b, p: model.Params) -> None:
@@ -125,7 +127,7 @@ def shade(b, p: model.Params) -> None:
         return
     ior = b.input("Grain IOR", "float")
     b.conductor(b.scale((1.0, 1.0, 1.0), specular), alpha, b.scale((1.0, 1.0, 1.0), ior), (0.0, 0.0, 0.0))
-    t = 1.0 - _specular_albedo(b, mu, ior, alpha)
+    t = 1.0 - specular_albedo_fit(b, mu, ior, alpha)
     b.diffuse(b.scale(b.input("Grain Albedo", "color"), grains * t * t))
 
 
@@ -143,14 +145,14 @@ def _roughness_factor(b, tau0, log_pores):
 ALBEDO_FIT = (0.9, 0.85, 0.3)
 
 
-def _specular_albedo(b, mu, eta, alpha):
+def specular_albedo_fit(b, mu, eta, alpha):
     """The directional albedo E_spec of dielectric grains' specular lobe by the fit ``ALBEDO_FIT``."""
     a, q, s = ALBEDO_FIT
     pulled = mu + (1.0 - mu) * b.minimum(a * b.exp(q * b.log(alpha)), 1.0)
-    return _fresnel_dielectric(b, pulled, eta) * (1.0 - s * alpha * alpha)
+    return fresnel_dielectric(b, pulled, eta) * (1.0 - s * alpha * alpha)
 
 
-def _fresnel_dielectric(b, c, eta):
+def fresnel_dielectric(b, c, eta):
     """Unpolarised Fresnel reflectance at cos θ = c from outside a dielectric of relative IOR η ≥ 1."""
     g = b.sqrt(eta * eta - 1.0 + c * c)
     a = (g - c) / (g + c)

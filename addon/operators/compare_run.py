@@ -46,13 +46,9 @@ def reference_module(model_id: str):
 
 
 def refusal(model_id: str, p) -> str | None:
-    """Why ``p`` cannot be compared with its reference (None: it can): a porous layer over a material's own shader
-    has no reference bulk."""
-    bulk = getattr(p, "bulk", None)
-    if bulk is not None and bulk.type == MODELS["micrograin"].WRAPPED:
-        return ("this porous layer wraps a material's own shader, which has no reference; compare a porous layer "
-                "over a reference bulk (diffuse, conductor, dielectric or another Lamina model)")
-    return None
+    """Why ``p`` cannot be compared with its reference (None: it can), as the model says (``reference_refusal``)."""
+    hook = getattr(MODELS[model_id], "reference_refusal", None)
+    return None if hook is None else hook(p)
 
 
 def has_multiple_scattering(model_id: str) -> bool:

@@ -56,3 +56,16 @@ def test_seen_from_below_the_layer_is_its_bulk():
                                   predicted_eval("bulk", p.bulk.params, "osl")(wi, wo))
     above = predicted_eval(model.ID, p, "osl")(MIRROR, WO)
     assert np.any(above != predicted_eval("bulk", p.bulk.params, "osl")(MIRROR, WO))
+
+
+def test_glass_transmission_gets_the_reflection_weight():
+    """Light through glass: the forms weight it g(θo)² (the bulk's one weight), the reference g(θo) ḡ; the ratio
+    of the two is exactly g(θo) / ḡ (the backlit error of dirt_on_glass is this, at grazing views)."""
+    p = model.params_from_dict(mapping.APPROXIMATIONS["bulk-transmission-weight"][1])
+    wi = -WO  # straight through: inside the rough glass's transmission lobe
+    ratio = predicted_eval(model.ID, p, "osl")(wi, WO)[:, 0] / reference.eval(p, wi, WO)[:, 0]
+
+    def g(c):
+        return np.sqrt(1.0 - reference.tau_beta(c, p.filling_factor, p.anfractuosity))
+
+    np.testing.assert_allclose(ratio, g(MU) / reference.hemispherical_mean(g), rtol=1e-9)
