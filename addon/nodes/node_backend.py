@@ -251,26 +251,27 @@ class NodeBackend:
         self._closure("ShaderNodeBsdfTransparent", {"Color": color})
 
     def conductor(self, color, alpha, eta, k):
-        """Metallic BSDF with the physical conductor Fresnel (4.3+), whose colour inputs are then unused: the
-        (grey) weight w goes through Mix Shaders, whose factor Cycles clamps to [0, 1], so w up to 2 is split
-        into min(w, 1) and min(max(w − 1, 0), 1). 4.2 has no such node: a Principled metal with the complex
-        IOR's normal-incidence reflectance as F0 (F82 model). [approx: conductor-f0-blender-4.2]"""
+        """Metallic BSDF with the physical conductor Fresnel (4.3+), whose colour inputs are then unused. 4.2 has no
+        such node: a Principled metal with the complex IOR's normal-incidence reflectance as F0 (F82 model).
+        [approx: conductor-f0-blender-4.2] The (grey) weight w goes through Mix Shaders, whose factor Cycles
+        clamps to [0, 1], so w up to 2 is split into min(w, 1) and min(max(w − 1, 0), 1)."""
+        depth = _depth(color, alpha, eta, k) + 1
         if hasattr(bpy.types, "ShaderNodeBsdfMetallic"):
-            depth = _depth(color, alpha, eta, k) + 1
             metal = self._node("ShaderNodeBsdfMetallic", depth, distribution="GGX", fresnel_type="PHYSICAL_CONDUCTOR")
-            for name, value in {"Roughness": self._roughness(alpha), "IOR": eta, "Extinction": k}.items():
-                self._link_or_set(value, metal.inputs[name])
-            gray = self._vector("DOT_PRODUCT", color, (1.0 / 3.0,) * 3, out="Value")
-            for part in (self.minimum(gray, 1.0), self.minimum(self.maximum(gray - 1.0, 0.0), 1.0)):
-                mix = self._node("ShaderNodeMixShader", _depth(part) + 1)
-                self._link_or_set(part, mix.inputs["Fac"])
-                self.links.new(metal.outputs[0], mix.inputs[2])
-                self._add(mix.outputs[0], _depth(part) + 1)
+            inputs = {"Roughness": self._roughness(alpha), "IOR": eta, "Extinction": k}
         else:
             k2 = k * k if isinstance(k, NodeValue) else tuple(float(x) * float(x) for x in k)
             f0 = ((eta - 1.0) * (eta - 1.0) + k2) / ((eta + 1.0) * (eta + 1.0) + k2)
-            self._closure("ShaderNodeBsdfPrincipled", {"Base Color": f0 * color, "Metallic": 1.0,
-                                                       "Roughness": self._roughness(alpha)}, distribution="GGX")
+            metal = self._node("ShaderNodeBsdfPrincipled", depth, distribution="GGX")
+            inputs = {"Base Color": f0, "Metallic": 1.0, "Roughness": self._roughness(alpha)}
+        for name, value in inputs.items():
+            self._link_or_set(value, metal.inputs[name])
+        gray = self._vector("DOT_PRODUCT", color, (1.0 / 3.0,) * 3, out="Value")
+        for part in (self.minimum(gray, 1.0), self.minimum(self.maximum(gray - 1.0, 0.0), 1.0)):
+            mix = self._node("ShaderNodeMixShader", max(_depth(part), depth) + 1)
+            self._link_or_set(part, mix.inputs["Fac"])
+            self.links.new(metal.outputs[0], mix.inputs[2])
+            self._add(mix.outputs[0], max(_depth(part), depth) + 1)
 
     def dielectric(self, color, alpha, ior):
         self._closure("ShaderNodeBsdfGlass", {"Color": color, "Roughness": self._roughness(alpha), "IOR": ior},

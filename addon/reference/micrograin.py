@@ -265,8 +265,8 @@ def smith_lambda_paper(w, tau0, beta, n_terms=4):
 
 
 # Float32 scheme: Gauss-Legendre nodes and weights on [0, 1], and the number of terms of M(1/2, 2, x).
-_F32_NODES = 6
-_F32_KUMMER_TERMS = 14
+_F32_NODES = 3
+_F32_KUMMER_TERMS = 10
 _x, _w = np.polynomial.legendre.leggauss(_F32_NODES)
 SCHEME_NODES, SCHEME_WEIGHTS = tuple(float(x) for x in 0.5 * (_x + 1.0)), tuple(float(w) for w in 0.5 * _w)
 KUMMER_COEFFICIENTS = tuple(float(c) for c in np.cumprod([1.0] + [(j + 0.5) / ((j + 1.0) * (j + 2.0))
@@ -288,15 +288,15 @@ def smith_lambda_float32(cos_theta, tau0, beta):
        series 2z (1 + z²/3 + z⁴/5 + z⁶/7) (z < 0.06: remainder below 1e-10).
     3. P / τ0 = −ln(1 − τ0)/τ0; for τ0 < 0.05 by its series Σ_{n<6} τ0^n / (n + 1) (remainder below 1e-8).
        P = τ0 (P / τ0); P / (e^P − 1) = (P / τ0)(1 − τ0).
-    4. 6-point Gauss-Legendre on [0, L]; M(1/2, 2, x) by Horner with its first 14 terms (x <= P <= 3.92
-       for τ0 <= 0.98: relative remainder below 1e-5).
+    4. 3-point Gauss-Legendre on [0, L]; M(1/2, 2, x) by Horner with its first 10 terms (x <= P <= 3.92
+       for τ0 <= 0.98). Sized for the shaders' cost (a node group evaluates every step as nodes): 6 points and
+       14 terms give 1e-5 relative, at 2.4 times the node-group render time of the GGX GAF instead of about
+       1.6 (docs/benchmarks.md).
 
-    Measured against ``smith_lambda`` for θ <= 89°, τ0 in [0, 0.98], β in [1e-3, 1]: the scheme itself (run
-    in float64) is within 1e-5 relative; in float32 the rounding of cos θ dominates, absolute error below
-    1.1e-4 (Λ reaches 10.6 at 89°; at small θ, where cos θ rounds to 1, Λ is below 1e-6). Only
+    Measured against ``smith_lambda`` for θ <= 89°, τ0 in [0, 0.98], β in [1e-3, 1]: within 2.6e-3 relative,
+    G1 = 1/(1 + Λ) within 2.1e-4, in float64 and in float32 alike (float32 rounding of cos θ adds less). Only
     + − × ÷, abs, sqrt, exp, log, max and a select, with fixed loop counts: the Cycles mapping
-    (nodes/micrograin.py) runs the same
-    ``lambda_scheme`` on its OSL and node-group backends.
+    (nodes/micrograin.py) runs the same ``lambda_scheme`` on its OSL and node-group backends.
     """
     c = np.abs(cos_theta)
     ops = _DtypeOps(np.result_type(c, tau0, beta))

@@ -51,19 +51,22 @@ def test_cycles_renders_the_predicted_mapping(name, form, tmp_path):
     for spec in scenes:
         img = _render(mat, spec, 128 if spec is FURNACE else 32, tmp_path)
         err = _relative(img, predicted_image(model.ID, p, form, spec), spec)
-        assert err < _tolerance(p, spec), f"{name} {form} {spec.name}: {err:.4f}"
+        assert err < _tolerance(p, spec, form), f"{name} {form} {spec.name}: {err:.4f}"
 
 
-def _tolerance(p, spec) -> float:
+def _tolerance(p, spec, form) -> float:
     """2% everywhere, with two measured exceptions (the prediction models Blender 5.0's closures):
     * backlit glass: Cycles' rough refraction of light from inside the glass differs a little from Walter's (the
       numpy model): 2.3%, from views where numpy gives 0 and Cycles a faint 0.003;
     * Blender 4.2's conductor Fresnel is the approximate formula (exact in 5.0), off for conductors of small
       extinction k (soot, copper oxide; dielectric grains use k = 0): 2.3-4.1% in the furnace, where grazing
-      angles count."""
+      angles count; and 4.2's node group draws metals as Principled with the normal-incidence F0
+      (conductor-f0-blender-4.2, not predicted): 3.2% for dense gold-like grains.
+    """
     if spec is BACKLIT:
         return 0.03
-    if bpy.app.version < (5, 0, 0) and p.grain.type != "diffuse" and min(p.grain.k) < 1.0:
+    old_metal = p.grain.type != "diffuse" and (min(p.grain.k) < 1.0 or form == "nodes")
+    if bpy.app.version < (5, 0, 0) and old_metal:
         return 0.05
     return 0.02
 

@@ -187,26 +187,27 @@ F32_BETAS = (1e-3, 0.01, 0.1, 0.5, 1.0)
 @pytest.mark.parametrize("beta", F32_BETAS)
 @pytest.mark.parametrize("tau0", F32_TAUS)
 def test_float32_scheme_in_float32(tau0, beta):
-    """Measured: absolute error of Λ below 1.1e-4 over the grid (float32 rounding of cos θ near 89°); bound 2e-4."""
+    """Measured over the grid: |G1 error| below 2.1e-4 and relative Λ error below 2.6e-3 (the scheme's 3 nodes and
+    10 terms; float32 rounding adds less); bounds 3e-4 and 3e-3 (Λ absolute where it is below 1e-4)."""
     c = np.cos(np.radians(F32_THETAS))
     with np.errstate(all="raise"):
         lam = mg.smith_lambda_float32(c.astype(np.float32), np.float32(tau0), np.float32(beta))
     exact = mg.smith_lambda(frames.spherical(c, 0.0), tau0, beta)
     assert lam.dtype == np.float32
     assert np.all(np.isfinite(lam)) and np.all(lam >= 0)
-    assert np.max(np.abs(lam - exact)) < 2e-4
-    assert np.max(np.abs(1 / (1 + lam) - 1 / (1 + exact))) < 1e-5
+    assert np.all(np.abs(lam - exact) <= 3e-3 * exact + 1e-4)
+    assert np.max(np.abs(1 / (1 + lam) - 1 / (1 + exact))) < 3e-4
     assert lam[0] == 0.0
 
 
 def test_float32_scheme_truncation():
-    """The scheme itself run in float64: relative error below 2e-5 (measured 9.4e-6), so float32 rounding of
-    the inputs dominates in float32."""
+    """The scheme itself run in float64: relative error below 3e-3 (measured 2.5e-3: the truncation of its 3
+    Gauss-Legendre nodes and 10 terms of M, chosen for the shaders' cost; G1 within 2.1e-4)."""
     c = np.cos(np.radians(np.linspace(0.5, 89.0, 60)))
     for tau0 in F32_TAUS:
         for beta in F32_BETAS:
             exact = mg.smith_lambda(frames.spherical(c, 0.0), tau0, beta)
-            assert np.allclose(mg.smith_lambda_float32(c, tau0, beta), exact, rtol=2e-5, atol=0)
+            assert np.allclose(mg.smith_lambda_float32(c, tau0, beta), exact, rtol=3e-3, atol=0)
     assert mg.smith_lambda_float32(np.array([0.0]), 0.5, 0.5)[0] == np.inf
 
 
@@ -222,7 +223,7 @@ def test_papers_series_breaks_in_float32():
             assert paper.dtype == np.float32
             bad += np.sum((paper < 0) | (np.abs(paper / exact - 1) > 1))
             ours = mg.smith_lambda_float32(w[:, 2], np.float32(tau0), np.float32(beta))
-            assert np.all(ours >= 0) and np.max(np.abs(ours - exact)) < 1e-4
+            assert np.all(ours >= 0) and np.all(np.abs(ours - exact) <= 3e-3 * exact + 1e-4)
     assert bad > 20
 
 
