@@ -23,7 +23,7 @@ from . import FORMS, MAPPINGS, osl
 from .expr import BULK_INPUT, TANGENT_INPUT, OslBackend
 from .node_backend import NodeBackend
 
-GENERATOR_VERSION = 1  # bump when generated shaders change, so cached groups are not reused
+GENERATOR_VERSION = 2  # bump when generated shaders change, so cached groups are not reused
 SOCKET_TYPES = {"float": "NodeSocketFloat", "color": "NodeSocketColor", "vector": "NodeSocketVector",
                 "shader": "NodeSocketShader"}
 
