@@ -93,24 +93,34 @@ def timed(fn) -> float:
 
 
 def render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
-    """Cycles render time of each preset as node group, OSL and a Principled BSDF with a similar lobe count
-    (the fastest of ``repeats`` renders each, which damps the machine's noise)."""
-    from .operators import blend_io
-    from .operators.cycles_render import render_cycles
+    """Cycles render time of each preset as node group, OSL and a Principled BSDF with a similar lobe count."""
     from .nodes import material as lamina_material
+
+    def materials(name):
+        p = model.params_from_dict(presets.load(MODEL, name))
+        return {**{form: lamina_material.new_material(MODEL, p, form) for form in ("nodes", "osl")},
+                "principled": principled_like(p)}
+
+    return fastest_renders(presets.names(MODEL), materials, samples, resolution, repeats)
+
+
+def fastest_renders(names, materials_of, samples: int, resolution: int, repeats: int = 3) -> list[dict]:
+    """For each name, the Cycles render time of the sphere scene for each material of ``materials_of(name)``
+    ({label: material}, created for the purpose and removed again): the fastest of ``repeats`` renders each,
+    which damps the machine's noise. Rows {"preset": name, label: seconds, ...}."""
     import bpy
 
+    from .operators import blend_io
+    from .operators.cycles_render import render_cycles
+
     spec = ref_scenes.sphere_scene(resolution=resolution)
+    path = os.path.join(bpy.app.tempdir, "bench.exr")
     rows = []
-    for name in presets.names(MODEL):
-        p = model.params_from_dict(presets.load(MODEL, name))
+    for name in names:
         before = blend_io.snapshot()
         try:
-            materials = {form: lamina_material.new_material(MODEL, p, form) for form in ("nodes", "osl")}
-            materials["principled"] = principled_like(p)
-            path = os.path.join(bpy.app.tempdir, "bench.exr")
-            times = {name: min(render_cycles(mat, spec, samples, 0, path)[1] for _ in range(repeats))
-                     for name, mat in materials.items()}
+            times = {label: min(render_cycles(mat, spec, samples, 0, path)[1] for _ in range(repeats))
+                     for label, mat in materials_of(name).items()}
         finally:
             blend_io.remove_new_data(before)
         rows.append({"preset": name, **times})

@@ -10,12 +10,11 @@ a Principled BSDF against the Principled BSDF alone.
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 
 from . import presets
-from .bench import ACCURACY_SCENES, mapping_errors, pct, reference_throughput
+from .bench import ACCURACY_SCENES, fastest_renders, mapping_errors, pct, reference_throughput
 from .models import micrograin as model
 from .nodes import micrograin as mapping
 from .reference import micrograin as reference
@@ -214,32 +213,20 @@ def accuracy_markdown(resolution: int) -> str:
 
 def render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
     """Cycles render time of each preset's porous layer over a Principled BSDF (both forms, both GAFs) and of
-    the Principled BSDF alone, fastest of ``repeats``."""
-    import bpy
-
+    the Principled BSDF alone."""
     from .nodes import material as lamina_material
-    from .operators import blend_io
-    from .operators.cycles_render import render_cycles
 
-    spec = ref_scenes.sphere_scene(resolution=resolution)
-    path = os.path.join(bpy.app.tempdir, "bench.exr")
-    rows = []
-    for name in presets.names(MODEL):
+    def materials(name):
         data = {**presets.load(MODEL, name), "bulk": {"type": model.WRAPPED}}
-        before = blend_io.snapshot()
-        try:
-            materials = {"principled": _principled()}
-            for form in ("nodes", "osl"):
-                for gaf in model.GAF_TYPES:
-                    mat = lamina_material.new_material(MODEL, model.params_from_dict({**data, "gaf": gaf}), form)
-                    _plug_principled(mat)
-                    materials[f"{form} {gaf}"] = mat
-            times = {k: min(render_cycles(m, spec, samples, 0, path)[1] for _ in range(repeats))
-                     for k, m in materials.items()}
-        finally:
-            blend_io.remove_new_data(before)
-        rows.append({"preset": name, **times})
-    return rows
+        out = {"principled": _principled()}
+        for form in ("nodes", "osl"):
+            for gaf in model.GAF_TYPES:
+                out[f"{form} {gaf}"] = lamina_material.new_material(
+                    MODEL, model.params_from_dict({**data, "gaf": gaf}), form)
+                _plug_principled(out[f"{form} {gaf}"])
+        return out
+
+    return fastest_renders(presets.names(MODEL), materials, samples, resolution, repeats)
 
 
 def _principled():

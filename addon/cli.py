@@ -106,25 +106,38 @@ def _compare_args(p) -> None:
 
 
 def load_params(args):
-    model = MODELS[args.model]
-    if args.params:
+    data = _read_dict(args.model, args.preset, args.params, "--params")
+    return _validated(MODELS[args.model], data).params
+
+
+def _read_dict(model_id: str, preset: str | None, path: str | None, option: str):
+    """A model dict from a JSON file (``option`` names it in messages) or, without one, from a preset."""
+    if path:
         try:
-            with open(args.params) as f:
-                data = json.load(f)
+            with open(path) as f:
+                return json.load(f)
         except (OSError, json.JSONDecodeError) as e:
-            raise CliError(f"cannot read --params {args.params}: {e}") from None
-    else:
-        try:
-            data = presets.load(args.model, args.preset)
-        except KeyError as e:
-            raise CliError(str(e.args[0])) from None
+            raise CliError(f"cannot read {option} {path}: {e}") from None
+    try:
+        return presets.load(model_id, preset)
+    except KeyError as e:
+        raise CliError(str(e.args[0])) from None
+
+
+def _validated(model, data: dict):
+    """The model's validation of ``data``; its clamping messages printed, a refusal as a CliError."""
     try:
         validated = model.validate(data)
     except ParamError as e:
         raise CliError(str(e)) from None
-    for w in validated.warnings:
-        print(f"lamina: warning: {w}", file=sys.stderr)
-    return validated.params
+    _warn(validated.warnings)
+    return validated
+
+
+def _warn(warnings, already=()) -> None:
+    for w in warnings:
+        if w not in already:
+            print(f"lamina: warning: {w}", file=sys.stderr)
 
 
 def _split(value: str, allowed, what: str) -> list[str]:
@@ -230,14 +243,7 @@ def cmd_bench(args) -> int:
 
 
 def cmd_bake(args) -> int:
-    blend = os.path.abspath(args.blend)
-    if not os.path.isfile(blend):
-        raise CliError(f"{blend} does not exist")
-    if args.out is None and not args.overwrite:
-        raise CliError("pass --out FILE, or --overwrite to save over --blend")
-    out = os.path.abspath(args.out or args.blend)
-    if os.path.exists(out) and not args.overwrite:
-        raise CliError(f"{out} exists; pass --overwrite to replace it")
+    blend, out = _blend_paths(args)
     from .operators import bake_ops
 
     try:
@@ -247,8 +253,7 @@ def cmd_bake(args) -> int:
     except bake_ops.BakeError as e:  # the textures: nothing was written
         print(f"lamina: error: {e}", file=sys.stderr)
         return 1
-    for w in warnings:
-        print(f"lamina: warning: {w}", file=sys.stderr)
+    _warn(warnings)
     print(f"lamina: {summary}; wrote {out}")
     return 0
 
@@ -258,30 +263,15 @@ def _porous_dict(args) -> tuple[dict, list[str]]:
     opened; returns it and the warnings."""
     from .models import micrograin
 
-    if args.json:
-        try:
-            with open(args.json) as f:
-                data = json.load(f)
-        except (OSError, json.JSONDecodeError) as e:
-            raise CliError(f"cannot read --json {args.json}: {e}") from None
-    else:
-        try:
-            data = presets.load(micrograin.ID, args.preset)
-        except KeyError as e:
-            raise CliError(str(e.args[0])) from None
+    data = _read_dict(micrograin.ID, args.preset, args.json, "--json")
     if not isinstance(data, dict):
         raise CliError(f"--json {args.json}: expected a JSON object (a micrograin dict)")
     data = {k: v for k, v in data.items() if k != "bulk"}  # the bulk is the material's own shader
-    try:
-        validated = micrograin.validate({**data, "bulk": {"type": micrograin.WRAPPED}})
-    except ParamError as e:
-        raise CliError(str(e)) from None
-    for w in validated.warnings:
-        print(f"lamina: warning: {w}", file=sys.stderr)
-    return data, validated.warnings
+    return data, _validated(micrograin, {**data, "bulk": {"type": micrograin.WRAPPED}}).warnings
 
 
-def cmd_add_porous(args) -> int:
+def _blend_paths(args) -> tuple[str, str]:
+    """--blend and where to write (--out, or --blend itself with --overwrite), checked before any work."""
     blend = os.path.abspath(args.blend)
     if not os.path.isfile(blend):
         raise CliError(f"{blend} does not exist")
@@ -290,6 +280,11 @@ def cmd_add_porous(args) -> int:
     out = os.path.abspath(args.out or args.blend)
     if os.path.exists(out) and not args.overwrite:
         raise CliError(f"{out} exists; pass --overwrite to replace it")
+    return blend, out
+
+
+def cmd_add_porous(args) -> int:
+    blend, out = _blend_paths(args)
     data, printed = _porous_dict(args)
     from .operators import material_ops
 
@@ -298,9 +293,7 @@ def cmd_add_porous(args) -> int:
     except material_ops.PorousError as e:  # the file's content: nothing was written
         print(f"lamina: error: {e}", file=sys.stderr)
         return 1
-    for w in warnings:
-        if w not in printed:
-            print(f"lamina: warning: {w}", file=sys.stderr)
+    _warn(warnings, already=printed)
     print(f"lamina: {summary}; wrote {out}")
     return 0
 

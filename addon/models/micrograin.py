@@ -62,6 +62,11 @@ CONDUCTORS = {
     "soot": ((1.75, 1.75, 1.75), (0.45, 0.45, 0.45)),
 }
 
+# The artist's alternative to the anfractuosity (Eq. 18); converted to β by ``validate``.
+ROUGHNESS = Param("roughness", "Equivalent Roughness", "float", 0.4, 0.0, 1.0, subtype="FACTOR",
+                  description="GGX roughness alpha of the grains' highlight (Eq. 18: anfractuosity x "
+                              "sqrt(-tau0 / ln(1 - tau0))); capped where the anfractuosity reaches 1")
+
 STACK = (
     Param("gaf", "Geometric Term", "enum", "series", items=GAF_TYPES,
           description="series: the micrograin Lambda of Eq. 25 (exact); ggx: GGX Lambda of the equivalent "
@@ -159,8 +164,7 @@ def validate(data: dict) -> Validated:
     layer = read_fields(LAYER + STACK, {k: v for k, v in fields.items() if k != "anfractuosity"},
                         "micrograin: ", warnings)
     if "roughness" in data:
-        roughness = Param("roughness", "Roughness", "float", 0.3, 0.0, 1.0).clamp(data["roughness"], "micrograin: ",
-                                                                                   warnings)
+        roughness = ROUGHNESS.clamp(data["roughness"], "micrograin: ", warnings)
         fields["anfractuosity"] = anfractuosity_for(layer["filling_factor"], roughness)
         if fields["anfractuosity"] > 1.0:
             warnings.append(f"micrograin: roughness {roughness:g} is above the largest equivalent roughness "

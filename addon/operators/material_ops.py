@@ -156,11 +156,18 @@ GRAIN_ITEMS = [(key, micrograin.GRAIN_LABELS[key], description) for key, descrip
     ("conductor", "Specular grains with a complex IOR: rust, metallic spray paint, soot"))]
 CONDUCTOR_ITEMS = [(k, k.replace("_", " ").capitalize(), f"Grains of {k.replace('_', ' ')} (complex IOR, RGB)")
                    for k in micrograin.CONDUCTORS] + [(CUSTOM, "Custom", "Set the complex IOR (n, k) below")]
-_GOLD = micrograin.CONDUCTORS["gold"]
 
 
-def _micrograin_desc(name: str) -> str:
-    return next(p.description for p in micrograin.LAYER if p.name == name)
+def _declared(decl, param: str, **overrides):
+    """A Blender property from the model's declaration of parameter ``param`` (range, label, description),
+    with ``overrides`` (e.g. a dialog default)."""
+    prm = next(p for p in decl if p.name == param)
+    kw = {"name": prm.label, "default": prm.default, "min": prm.min, "max": prm.max,
+          "description": prm.description}
+    if prm.kind == "float":
+        return bpy.props.FloatProperty(**({"subtype": prm.subtype} if prm.subtype else {}), **{**kw, **overrides})
+    subtype = "COLOR" if prm.kind == "color" and prm.max == 1.0 else "NONE"
+    return bpy.props.FloatVectorProperty(size=3, subtype=subtype, **{**kw, **overrides})
 
 
 class LAMINA_OT_add_porous_layer(bpy.types.Operator):
@@ -174,29 +181,19 @@ class LAMINA_OT_add_porous_layer(bpy.types.Operator):
     preset: bpy.props.EnumProperty(name="Preset", items=POROUS_PRESET_ITEMS, default=CUSTOM,
                                    description="A porous layer after the paper's Fig. 1, or Custom (the "
                                                "preset's bulk is ignored: the bulk is your material)")
-    filling_factor: bpy.props.FloatProperty(name="Filling Factor", default=0.3, min=0.0, max=micrograin.MAX_FILLING,
-                                            subtype="FACTOR", description=_micrograin_desc("filling_factor"))
+    filling_factor: _declared(micrograin.LAYER, "filling_factor", default=0.3)
     roughness_control: bpy.props.EnumProperty(name="Roughness", items=ROUGHNESS_ITEMS, default="anfractuosity",
                                               description="Set the grains' shape or the roughness they look like")
-    anfractuosity: bpy.props.FloatProperty(name="Anfractuosity", default=0.5, min=micrograin.MIN_ANFRACTUOSITY,
-                                           max=1.0, subtype="FACTOR", description=_micrograin_desc("anfractuosity"))
-    roughness: bpy.props.FloatProperty(
-        name="Equivalent Roughness", default=0.4, min=0.0, max=1.0, subtype="FACTOR",
-        description="GGX roughness alpha of the grains' highlight (Eq. 18: anfractuosity x "
-                    "sqrt(-tau0 / ln(1 - tau0))); capped where the anfractuosity reaches 1")
+    anfractuosity: _declared(micrograin.LAYER, "anfractuosity")
+    roughness: _declared((micrograin.ROUGHNESS,), "roughness")
     grain_type: bpy.props.EnumProperty(name="Grains", items=GRAIN_ITEMS, default="diffuse",
                                        description="The grains' micro-BRDF")
-    grain_color: bpy.props.FloatVectorProperty(name="Grain Albedo", subtype="COLOR", size=3, min=0.0, max=1.0,
-                                               default=(0.70, 0.68, 0.64),
-                                               description="Albedo of the grains' matte part (linear)")
-    grain_ior: bpy.props.FloatProperty(name="Grain IOR", default=1.5, min=1.0, max=3.0,
-                                       description="Index of refraction of the grains' specular coat")
+    grain_color: _declared(micrograin.GRAIN["diffuse"], "albedo", default=(0.70, 0.68, 0.64))
+    grain_ior: _declared(micrograin.GRAIN["dielectric"], "ior")
     conductor: bpy.props.EnumProperty(name="Conductor", items=CONDUCTOR_ITEMS, default="gold",
                                       description="What the conductor grains are made of")
-    conductor_ior: bpy.props.FloatVectorProperty(name="IOR n", size=3, min=0.01, max=10.0, default=_GOLD[0],
-                                                 description="Real part of the grains' complex IOR (R, G, B)")
-    conductor_k: bpy.props.FloatVectorProperty(name="Extinction k", size=3, min=0.0, max=20.0, default=_GOLD[1],
-                                               description="Imaginary part of the grains' complex IOR (R, G, B)")
+    conductor_ior: _declared(micrograin.GRAIN["conductor"], "ior", name="IOR n")
+    conductor_k: _declared(micrograin.GRAIN["conductor"], "k", name="Extinction k")
     form: bpy.props.EnumProperty(name="Form", items=FORM_ITEMS, default="nodes")
     assign_to_slot: bpy.props.BoolProperty(
         name="Assign to slot", default=True,

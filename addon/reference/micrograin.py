@@ -40,7 +40,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..models.micrograin import SIMPLE_BULKS, Bulk, Params, equivalent_roughness, params_from_dict
-from . import microfacet, spongecake
+from . import lobes, microfacet, spongecake
 from .frames import as_directions, dot, normalize, reflect, spherical
 
 __all__ = ["Params", "Sample", "params_from_dict", "ndf", "sample_ndf", "tau_beta", "tau_plus", "w_plus",
@@ -289,9 +289,8 @@ def smith_lambda_float32(cos_theta, tau0, beta):
     3. P / τ0 = −ln(1 − τ0)/τ0; for τ0 < 0.05 by its series Σ_{n<6} τ0^n / (n + 1) (remainder below 1e-8).
        P = τ0 (P / τ0); P / (e^P − 1) = (P / τ0)(1 − τ0).
     4. 3-point Gauss-Legendre on [0, L]; M(1/2, 2, x) by Horner with its first 10 terms (x <= P <= 3.92
-       for τ0 <= 0.98). Sized for the shaders' cost (a node group evaluates every step as nodes): 6 points and
-       14 terms give 1e-5 relative, at 2.4 times the node-group render time of the GGX GAF instead of about
-       1.6 (docs/benchmarks.md).
+       for τ0 <= 0.98). Sized for the shaders' cost (a node group evaluates every step as nodes; render times in
+       docs/benchmarks.md): 6 points and 14 terms would give 1e-5 relative with 84 Horner steps instead of 30.
 
     Measured against ``smith_lambda`` for θ <= 89°, τ0 in [0, 0.98], β in [1e-3, 1]: within 2.6e-3 relative,
     G1 = 1/(1 + Λ) within 2.1e-4, in float64 and in float32 alike (float32 rounding of cos θ adds less). Only
@@ -636,13 +635,7 @@ def sample(params: Params, wi, u) -> Sample:
     """Sample wo for each wi from u in [0, 1)^3: u0 picks the lobe (then reused by the bulk), u1 and u2 the
     direction. Grain lobes: a normal of ``sample_ndf`` reflecting wi, or a cosine lobe above."""
     wi, u = as_directions(wi), as_directions(u)
-    p = _lobe_probabilities(params, wi)
-    cdf = np.cumsum(p, axis=1)
-    last = p.shape[1] - 1 - np.argmax(p[:, ::-1] > 0, axis=1)
-    lobe = np.minimum(np.sum(u[:, :1] >= cdf, axis=1), last)
-    rows = np.arange(len(wi))
-    chosen = p[rows, lobe]
-    u0 = np.clip((u[:, 0] - (cdf[rows, lobe] - chosen)) / chosen, 0.0, np.nextafter(1.0, 0.0))
+    lobe, _, u0 = lobes.choose(_lobe_probabilities(params, wi), u[:, 0])
     wo = np.empty_like(wi)
     delta = np.zeros(len(wi), bool)
     m = lobe == 0

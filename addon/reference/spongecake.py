@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..models.spongecake import Layer, Params, Substrate, params_from_dict
-from . import hg, microfacet, sggx
+from . import hg, lobes, microfacet, sggx
 from .frames import as_directions, dot, spherical
 
 __all__ = ["Params", "Sample", "params_from_dict", "eval", "pdf", "sample", "delta_transmittance",
@@ -242,13 +242,7 @@ def pdf(params: Params, wi, wo):
 def sample(params: Params, wi, u) -> Sample:
     """Sample wo for each wi from u in [0, 1)^3: u0 picks the lobe (then reused), u1 and u2 the direction."""
     wi, u = as_directions(wi), as_directions(u)
-    p = _lobe_probabilities(params, wi)
-    cdf = np.cumsum(p, axis=1)
-    last = p.shape[1] - 1 - np.argmax(p[:, ::-1] > 0, axis=1)
-    lobe = np.minimum(np.sum(u[:, :1] >= cdf, axis=1), last)
-    rows = np.arange(len(wi))
-    chosen = p[rows, lobe]
-    u0 = np.clip((u[:, 0] - (cdf[rows, lobe] - chosen)) / chosen, 0.0, np.nextafter(1.0, 0.0))
+    lobe, chosen, u0 = lobes.choose(_lobe_probabilities(params, wi), u[:, 0])
     wo = -wi.copy()
     for k, layer in enumerate(params.layers):
         m = lobe == k

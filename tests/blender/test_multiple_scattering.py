@@ -32,14 +32,6 @@ def registered():
     addon.unregister()
 
 
-@pytest.fixture
-def sphere():
-    obj = bpy.data.objects.new("ball", bpy.data.meshes.new("ball"))
-    bpy.context.scene.collection.objects.link(obj)
-    bpy.context.view_layer.objects.active = obj
-    return obj
-
-
 def _preset(name, **changes):
     return model.params_from_dict({**presets.load(model.ID, name), **changes})
 

@@ -4,27 +4,14 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import addon  # noqa: E402
 from addon.nodes import material  # noqa: E402
 
 pytestmark = pytest.mark.blender
 
 
-@pytest.fixture
-def registered():
+@pytest.fixture(autouse=True)
+def clean_file():
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    addon.register()
-    yield
-    addon.unregister()
-
-
-@pytest.fixture
-def sphere():
-    mesh = bpy.data.meshes.new("ball")
-    obj = bpy.data.objects.new("ball", mesh)
-    bpy.context.scene.collection.objects.link(obj)
-    bpy.context.view_layer.objects.active = obj
-    return obj
 
 
 def test_add_material_from_a_preset_keeps_the_users_material(registered, sphere):

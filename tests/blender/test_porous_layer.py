@@ -7,7 +7,6 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import addon  # noqa: E402
 from addon import presets  # noqa: E402
 from addon.models import micrograin  # noqa: E402
 from addon.models import spongecake  # noqa: E402
@@ -169,22 +168,6 @@ def test_set_form_on_a_wrapped_material_keeps_the_bulk_link_and_the_values():
 
 
 # ------------------------------------------------------------------------------------------------ operator
-
-
-@pytest.fixture
-def registered():
-    addon.register()
-    yield
-    addon.unregister()
-
-
-@pytest.fixture
-def sphere():
-    mesh = bpy.data.meshes.new("ball")
-    obj = bpy.data.objects.new("ball", mesh)
-    bpy.context.scene.collection.objects.link(obj)
-    bpy.context.view_layer.objects.active = obj
-    return obj
 
 
 def test_operator_with_a_preset_replaces_the_slot_and_keeps_the_original(registered, sphere):

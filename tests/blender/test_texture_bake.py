@@ -13,7 +13,6 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import addon  # noqa: E402
 from addon import cli  # noqa: E402
 from addon.bake import exr, textures  # noqa: E402
 from addon.bake import layer_rows as rows_  # noqa: E402
@@ -383,13 +382,6 @@ def test_unsaved_files_bake_into_a_user_or_temporary_folder():
 
 
 # ------------------------------------------------------------------------------------- operator, CLI
-
-@pytest.fixture
-def registered():
-    addon.register()
-    yield
-    addon.unregister()
-
 
 def test_the_operator_bakes_and_reports(saved, registered):
     path, _ = _halves(saved, "albedo")
