@@ -18,7 +18,7 @@ class ParamError(ValueError):
 class Param:
     name: str
     label: str
-    kind: str  # "float" | "color" | "vector" | "enum" | "bool"
+    kind: str  # "float" | "int" | "color" | "vector" | "enum" | "bool"
     default: object
     min: float | None = None
     max: float | None = None
@@ -40,6 +40,11 @@ class Param:
             return bool(value)
         if self.kind == "float":
             return self._clamp_scalar(_as_float(value, where, self.name), where, warnings)
+        if self.kind == "int":
+            v = _as_float(value, where, self.name)
+            if not v.is_integer():
+                raise ParamError(f"{where}{self.name}: expected a whole number, got {value!r}")
+            return int(self._clamp_scalar(v, where, warnings))
         values = _as_triple(value, where, self.name)
         if self.kind == "vector":
             return _normalized(values, self.default, where, self.name, warnings)
