@@ -265,7 +265,7 @@ def _lobes_at(p: Params, wo):
 def _surface(p: Params, wi, wo):
     """Order 0: F(i·h) G1(o) G1(i) D(h) / (4 cos θo cos θi), D = M / A3 (Eqs. 1, 2, 6-9)."""
     h = normalize(wi + wo)
-    ci, co = np.maximum(wi[:, 2], 1e-300), wo[:, 2]
+    ci, co = np.maximum(wi[:, 2], 1e-100), np.maximum(wo[:, 2], 1e-100)  # G1 -> 0 makes f -> 0 there
     d = _lobe_density(h, np.array([0.0, 0.0, 1.0]), p.kappa_top) / vmf.a3(p.kappa_top)
     g = smith_g1(F64, ci, p.kappa_top) * smith_g1(F64, co, p.kappa_top)
     return microfacet.fresnel_dielectric(dot(wi, h), p.eta) * g * d / (4.0 * ci * co)
@@ -325,26 +325,38 @@ def _lobe_probabilities(p: Params, wo, found):
 
 
 def _reflection_pdf(kappa, wi, wo):
-    """Density of wi = reflect(wo, h), h ~ M(n, κ) on the whole sphere: (M(h) + M(−h)) / (4 |wo·h|)."""
+    """Density of wi = reflect(wo, h), h ~ M(n, κ) on the whole sphere: (M(h) + M(−h)) / (4 |wo·h|). Every h on
+    the great circle orthogonal to wo reflects to −wo: the density has an integrable spike there (below the
+    horizon for views above, where reflection lobes are zero)."""
     h = normalize(wi + wo)
     z = np.array([0.0, 0.0, 1.0])
     dens = _lobe_density(h, z, kappa) + _lobe_density(-h, z, kappa)
     return np.divide(dens, 4.0 * np.abs(dot(wo, h)), out=np.zeros(len(wo)), where=np.abs(dot(wo, h)) > 0)
 
 
+def _lobe_pdf(lobe: Lobe, wi, wo):
+    """Density of ``_lobe_sample``: cosine (diffuse), the vMF around −wo (transmission), else the (E)NDF's
+    reflection density."""
+    if lobe.kind == "diffuse":
+        return np.maximum(wi[:, 2], 0.0) / np.pi
+    if lobe.kind == "transmission":
+        return _lobe_density(wi, -wo, lobe.kappa)
+    return _reflection_pdf(lobe.kappa, wi, wo)
+
+
+def _lobe_sample(lobe: Lobe, wo, u1, u2):
+    kappa = np.broadcast_to(np.asarray(lobe.kappa if lobe.kappa is not None else 0.0), (len(wo),))
+    if lobe.kind == "diffuse":
+        return spherical(np.sqrt(u1), 2.0 * np.pi * u2)
+    if lobe.kind == "transmission":
+        return vmf.sample_around(-wo, kappa, u1, u2)
+    return reflect(wo, vmf.sample(kappa, u1, u2))
+
+
 def _pdf_above(p: Params, wi, wo):
     found = _lobes_at(p, wo)
     prob = _lobe_probabilities(p, wo, found)
-    out = np.zeros(len(wo))
-    for column, lobe in enumerate(found):
-        if lobe.kind == "diffuse":
-            dens = np.maximum(wi[:, 2], 0.0) / np.pi
-        elif lobe.kind == "transmission":
-            dens = _lobe_density(wi, -wo, lobe.kappa)
-        else:
-            dens = _reflection_pdf(lobe.kappa, wi, wo)
-        out += prob[:, column] * dens
-    return out
+    return sum(prob[:, column] * _lobe_pdf(lobe, wi, wo) for column, lobe in enumerate(found))
 
 
 def pdf(p: Params, wi, wo):
@@ -363,16 +375,13 @@ def _sample_above(p: Params, wo, u):
     wi = np.empty_like(wo)
     for column, lb in enumerate(found):
         m = lobe == column
-        if not m.any():
-            continue
-        if lb.kind == "diffuse":
-            wi[m] = spherical(np.sqrt(u[m, 1]), 2.0 * np.pi * u[m, 2])
-        elif lb.kind == "transmission":
-            wi[m] = vmf.sample_around(-wo[m], np.broadcast_to(lb.kappa, (len(wo),))[m], u[m, 1], u[m, 2])
-        else:
-            h = vmf.sample(np.broadcast_to(lb.kappa, (len(wo),))[m], u[m, 1], u[m, 2])
-            wi[m] = reflect(wo[m], h)
+        if m.any():
+            wi[m] = _lobe_sample(lb._replace(kappa=_rows(lb.kappa, m)), wo[m], u[m, 1], u[m, 2])
     return wi
+
+
+def _rows(kappa, m):
+    return None if kappa is None else np.broadcast_to(np.asarray(kappa), m.shape)[m]
 
 
 def sample(p: Params, wo, u) -> Sample:
@@ -392,19 +401,21 @@ def sample(p: Params, wo, u) -> Sample:
 
 
 def directional_albedo(p: Params, wo, n: int = 16384, seed: int = 0, orders: bool = False):
-    """∫ f(wi, wo) |cos wi| dwi (N, 3) (per order (bounces + 1, N, 3) with ``orders``): seeded Monte Carlo with
-    the balance heuristic over ``sample`` (7/8 of the samples) and uniform directions on the sphere."""
+    """∫ f(wi, wo) |cos wi| dwi (N, 3) (per order (bounces + 1, N, 3) with ``orders``): seeded Monte Carlo, each
+    lobe integrated with n samples of its own sampler (no variance from lobes of very different widths)."""
     wo = as_directions(wo)
     rng = np.random.default_rng(seed)
     albedo = np.zeros((p.bounces + 1, len(wo), 3))
-    n_b, n_u = (7 * n) // 8, n // 8
-    for row, w in enumerate(wo):
-        ws = np.repeat(w[None], n_b, axis=0)
-        s = sample(p, ws, rng.random((n_b, 3)))
-        x = np.concatenate([s.wi, spherical(2.0 * rng.random(n_u) - 1.0, 2.0 * np.pi * rng.random(n_u))])
-        ws = np.repeat(w[None], len(x), axis=0)
-        q = n_b * pdf(p, x, ws) + n_u / (4.0 * np.pi)
-        albedo[:, row] = np.sum(eval_orders(p, x, ws) * (np.abs(x[:, 2]) / q)[None, :, None], axis=1)
+    for row in range(len(wo)):
+        (q, _, w, _), = [v for v in _seen_from_above(p, wo[row:row + 1], wo[row:row + 1]) if v[3].all()]
+        ws = np.repeat(w, n, axis=0)
+        for lobe in _lobes_at(q, w):
+            u = rng.random((2, n))
+            x = _lobe_sample(lobe, ws, u[0], u[1])
+            density = _lobe_pdf(lobe, x, ws)
+            value = _lobe_value(q, lobe, x, ws) * np.abs(x[:, 2:])
+            albedo[lobe.order, row] += np.sum(np.divide(value, density[:, None], out=np.zeros_like(value),
+                                                        where=density[:, None] > 0), axis=0) / n
     return albedo if orders else albedo.sum(axis=0)
 
 
