@@ -24,39 +24,12 @@ from addon.reference import vmf, warping
 from addon.reference.frames import dot
 
 Z = np.array([0.0, 0.0, 1.0])
-EXAMPLES = [(1.0, 50.0, 200.0), (np.sqrt(0.5), 100.0, 100.0), (0.5, 200.0, 50.0)]
-ETA = 1.5
+EXAMPLES = warping.FIGURE_EXAMPLES
+ETA = warping.FIGURE_ETA
 
 
 def _incident(cos_theta):
     return np.array([np.sqrt(max(0.0, 1.0 - cos_theta * cos_theta)), 0.0, cos_theta])
-
-
-def _exact_stats(nodes, weights, density):
-    """Mass, mean direction and moment-matched kappa of a density tabulated on a lobe rule."""
-    mass = np.sum(density * weights)
-    mean = np.sum(nodes * (density * weights)[:, None], axis=0)
-    mu = mean / np.linalg.norm(mean)
-    d = nodes - mu
-    return mass, mu, vmf.kappa_from_complement(np.sum(0.5 * dot(d, d) * density * weights) / mass)
-
-
-def _validate(kind, example):
-    cos_om, kappa_o, kappa_m = EXAMPLES[example]
-    mu_o = _incident(cos_om)
-    if kind == "r":
-        lobe = warping.joint_reflect(mu_o, kappa_o, Z, kappa_m)
-        exact = lambda x: warping.exact_density_reflect(x, mu_o, kappa_o, Z, kappa_m)
-    else:
-        lobe = warping.joint_refract(mu_o, kappa_o, Z, kappa_m, ETA)
-        exact = lambda x: warping.exact_density_refract(x, mu_o, kappa_o, Z, kappa_m, ETA)
-    mu_hat, kappa_hat = lobe.mu[0], lobe.kappa[0]
-    nodes, weights = warping.lobe_rule(mu_hat, kappa_hat)
-    d_exact = exact(nodes)
-    mass, mu, kappa = _exact_stats(nodes, weights, d_exact)
-    l1 = np.sum(np.abs(d_exact - vmf.density(1.0 - 0.5 * dot(nodes - mu_hat, nodes - mu_hat), kappa_hat)) * weights)
-    angle = np.degrees(np.arccos(np.clip(mu @ mu_hat, -1.0, 1.0)))
-    return mass, angle, kappa_hat / kappa - 1.0, l1
 
 
 # measured (angle deg, kappa relative error, L1), bounds a little above
@@ -67,7 +40,8 @@ BOUNDS = {("r", 0): (0.001, 0.004, 0.008), ("r", 1): (0.65, 0.045, 0.18), ("r", 
 @pytest.mark.parametrize("kind,example", sorted(BOUNDS))
 def test_joint_warp_matches_exact_distribution(kind, example):
     """Figs. 6-7: the approximating lobe against Eq. 16 / 20 (bounds in BOUNDS, measurements in the docstring)."""
-    mass, angle, kappa_err, l1 = _validate(kind, example)
+    e = warping.joint_warp_error(kind, *EXAMPLES[example])
+    mass, angle, kappa_err, l1 = e["mass"], e["angle"], e["kappa_error"], e["l1"]
     print(f"{kind} example {example + 1}: angle {angle:.4f} deg, kappa err {kappa_err:+.4f}, L1 {l1:.4f}")
     assert abs(mass - 1.0) < 1e-3  # the rule holds the whole exact distribution (front-facing fraction >= 0.9995)
     max_angle, max_kappa, max_l1 = BOUNDS[kind, example]
@@ -90,7 +64,7 @@ def test_brute_force_evaluators_agree(example):
             lobe = warping.joint_refract(mu_o, kappa_o, Z, kappa_m, ETA)
             exact = lambda x: warping.exact_density_refract(x, mu_o, kappa_o, Z, kappa_m, ETA)
         nodes, weights = warping.lobe_rule(lobe.mu[0], lobe.kappa[0])
-        mass, mu, kappa = _exact_stats(nodes, weights, exact(nodes))
+        mass, mu, kappa = warping.exact_moments(nodes, weights, exact(nodes))
         mu_mc, kappa_mc = warping.sample_moments(dirs)
         assert abs(mass - kept) < 1e-4
         assert np.degrees(np.arccos(min(1.0, mu @ mu_mc))) < 0.05
