@@ -1,9 +1,9 @@
 """Cycles shaders generated from each model's mapping (``<model>.py``, bpy-free) in two forms:
 a native node group (``node_backend``) and an OSL script node (``osl``); ``material`` assembles them."""
-from . import bulk, micrograin, spongecake
+from . import bulk, micrograin, spongecake, thin_coat
 
 # Model id -> mapping; "bulk" is the simple BSDFs that reference bulks under a porous layer are made of.
-MAPPINGS = {"spongecake": spongecake, "micrograin": micrograin, bulk.ID: bulk}
+MAPPINGS = {"spongecake": spongecake, "micrograin": micrograin, "thin_coat": thin_coat, bulk.ID: bulk}
 FORMS = ("nodes", "osl")  # node group (every device) and OSL script (CPU, OptiX)
 
 
@@ -23,11 +23,19 @@ def predicted_eval(model_id: str, p, form: str):
 
 
 def predicted_furnace(model_id: str, p, form: str):
-    """``a(wo)``: what a white furnace shows through the form, directional albedo plus transparency."""
+    """``a(wo)``: what a white furnace shows through the form, directional albedo plus transparency. Closures with an
+    albedo quadrature of their own (``closures_np.ALBEDO``: Lambert, sharp Beckmann lobes) use it; the others are
+    integrated on ``reference.scenes.directional_albedo``'s direction grid."""
     from ..reference.scenes import directional_albedo
 
-    evaluate = predicted_eval(model_id, p, form)
-    return lambda wo: directional_albedo(evaluate, wo) + _backend(model_id, p, form, wo).transparency()
+    def furnace(wo):
+        b = _backend(model_id, p, form, wo)
+        own, rest = b.own_albedo()
+        if rest:
+            own = own + directional_albedo(lambda wi, w: _backend(model_id, p, form, w).evaluate(wi, own=False), wo)
+        return own + b.transparency()
+
+    return furnace
 
 
 def predicted_image(model_id: str, p, form: str, scene):

@@ -26,6 +26,9 @@ TANGENT_INPUT = "LaminaTangent"
 MIN_TANGENT = 1e-6
 # Smallest argument of a logarithm (float32-safe: its log is finite).
 MIN_LOG = 1e-30
+# Largest grey weight a node group gives a closure without a colour input (Mix Shaders, whose factor Cycles clamps to
+# [0, 1], one per unit: ``NodeBackend._scaled``); mappings cap such weights at it so that both forms agree.
+MAX_MIX_WEIGHT = 4
 # The Shader input that carries the material a model wraps (micrograin's bulk).
 BULK_INPUT = "Bulk"
 
@@ -34,7 +37,13 @@ BULK_INPUT = "Bulk"
 
 
 class NumpyBackend:
-    """Evaluate a mapping in float64 for N view directions ``wo`` (local frame, z = normal)."""
+    """Evaluate a mapping in float64 for N view directions ``wo`` (local frame, z = normal).
+
+    ``metallic_node``: whether the node group predicted (form "nodes") has Blender 4.3+'s Metallic BSDF node (a
+    Beckmann reflection with the dielectric Fresnel per microfacet); Blender 4.2's takes the Fresnel at the view
+    (``fresnel_at_view``). The Blender tests set it from the running Blender."""
+
+    metallic_node = True
 
     def __init__(self, wo: np.ndarray, inputs: dict, form: str = "osl", bulk=None):
         self.form = form  # "osl" or "nodes": which Cycles form to predict
@@ -70,6 +79,10 @@ class NumpyBackend:
         """The unit direction ``d`` (from ``direction``), or −d where it points below the tangent plane."""
         return np.where(d[:, 2:3] < 0.0, -d, d)
 
+    def view(self):
+        """The unit view direction ωo (a direction, as ``direction`` returns)."""
+        return self.wo / np.maximum(np.linalg.norm(self.wo, axis=1, keepdims=True), 1e-12)
+
     def dot(self, a, b):
         return np.einsum("ij,ij->i", a, b)
 
@@ -89,6 +102,8 @@ class NumpyBackend:
     maximum = staticmethod(np.maximum)
     minimum = staticmethod(np.minimum)
     abs = staticmethod(np.abs)
+    cos = staticmethod(np.cos)
+    acos = staticmethod(lambda x: np.arccos(np.clip(x, -1.0, 1.0)))
 
     @staticmethod
     def step_below(x, edge):
@@ -123,6 +138,17 @@ class NumpyBackend:
     def dielectric(self, color, alpha, ior):
         self._add("dielectric", color, alpha=alpha, ior=ior)
 
+    def beckmann(self, color, alpha, eta=None):
+        """Beckmann reflection around the shading normal; with ``eta`` the dielectric Fresnel per microfacet (Blender
+        4.2's node group: at the view, ``fresnel_at_view``)."""
+        if eta is not None and self.form == "nodes" and not self.metallic_node:
+            color, eta = fresnel_at_view(self, color, eta), None
+        self._add("beckmann", color, alpha=alpha, eta=eta)
+
+    def beckmann_refraction(self, color, alpha, ior, normal):
+        """Beckmann refraction without Fresnel around ``normal`` (a direction) into a medium of relative ``ior``."""
+        self._add("beckmann_refraction", color, alpha=alpha, ior=ior, normal=normal)
+
     def bulk(self, weight):
         """The shader plugged into the ``Bulk`` input, scaled by ``weight``."""
         for kind, color, kw in self._bulk(self.wo).closures:
@@ -145,14 +171,28 @@ class NumpyBackend:
                 out += color * closures_np.ggx_sampling_leak(self.wo, **kw)
         return out
 
-    def evaluate(self, wi: np.ndarray) -> np.ndarray:
-        """The BSDF value (no cosine) that the recorded closures give for light from ``wi``."""
+    def own_albedo(self) -> tuple[np.ndarray, bool]:
+        """The directional albedo (N, 3) of the closures that have a quadrature of their own (``closures_np.ALBEDO``:
+        Lambert exactly, Beckmann lobes of any sharpness in slope space), and whether other closures remain (for
+        ``evaluate(wi, own=False)`` on a direction grid)."""
+        from . import closures_np
+
+        out = np.zeros((self.n, 3))
+        for kind, color, kw in self.closures:
+            if kind in closures_np.ALBEDO:
+                out += np.broadcast_to(color, (self.n, 3)) * closures_np.ALBEDO[kind](self.wo, **kw)
+        return out, any(kind not in closures_np.ALBEDO for kind, _, _ in self.closures)
+
+    def evaluate(self, wi: np.ndarray, own: bool = True) -> np.ndarray:
+        """The BSDF value (no cosine) that the recorded closures give for light from ``wi`` (with ``own`` False, only
+        the closures without an albedo quadrature of their own, see ``own_albedo``)."""
         from . import closures_np
 
         wi = np.asarray(wi, dtype=np.float64)
         f = np.zeros((self.n, 3))
         for kind, color, kw in self.closures:
-            f += color * closures_np.EVAL[kind](wi, self.wo, **kw)
+            if own or kind not in closures_np.ALBEDO:
+                f += color * closures_np.EVAL[kind](wi, self.wo, **kw)
         return f
 
 
@@ -167,6 +207,8 @@ class OslValue:
         self.kind = kind
 
     def _bin(self, other, op, swap=False):
+        if not isinstance(other, (OslValue, int, float, tuple, list)):
+            return NotImplemented  # e.g. a lazy value of a mapping's own (nodes.thin_coat) takes over
         o = _osl(other)
         kind = "color" if "color" in (self.kind, o.kind) else "float"
         a, b = (o, self) if swap else (self, o)
@@ -219,6 +261,8 @@ class OslBackend:
     dot(I, N) as the facing cosine), so ωo = I.
     """
 
+    form = "osl"
+
     def __init__(self, params: list[tuple[str, str, object]]):
         self.params = params  # (osl name, kind, default)
         self.lines: list[str] = []
@@ -254,6 +298,9 @@ class OslBackend:
     def upper_hemisphere(self, d):
         return self._let(OslValue(f"dot({d.code}, N) < 0.0 ? -{d.code} : {d.code}", "normal"))
 
+    def view(self):
+        return self._let(OslValue("normalize(I)", "normal"))
+
     def dot(self, a, b):
         return self._let(OslValue(f"dot({a.code}, {b.code})", "float"))
 
@@ -280,6 +327,12 @@ class OslBackend:
 
     def abs(self, x):
         return self._call("abs", x)
+
+    def cos(self, x):
+        return self._call("cos", x)
+
+    def acos(self, x):
+        return self._call("acos", self.maximum(self.minimum(x, 1.0), -1.0))
 
     def step_below(self, x, edge):
         return self._let(OslValue(f"({_osl(x).code} < {_osl(edge).code} ? 1.0 : 0.0)", "float"))
@@ -322,6 +375,18 @@ class OslBackend:
         self._closure(1.0, f'dielectric_bsdf(N, Tn, {_osl(color).code}, {_osl(color).code}, {a}, {a}, '
                            f'{_osl(ior).code}, "ggx")')
 
+    def beckmann(self, color, alpha, eta=None):
+        a = _osl(alpha).code
+        if eta is None:
+            self._closure(color, f'microfacet("beckmann", N, Tn, {a}, {a}, 1.0, 0)')
+        else:  # reflection only: no transmission tint
+            self._closure(1.0, f'dielectric_bsdf(N, Tn, {_osl(color).code}, color(0), {a}, {a}, {_osl(eta).code}, '
+                               f'"beckmann")')
+
+    def beckmann_refraction(self, color, alpha, ior, normal):
+        a = _osl(alpha).code
+        self._closure(color, f'microfacet("beckmann", {normal.code}, Tn, {a}, {a}, {_osl(ior).code}, 1)')
+
     def source(self, shader_name: str, header: str) -> str:
         params = ",\n    ".join(f"{_osl_type(kind)} {osl_identifier(name)} = {_osl_default(kind, d)}"
                                  for name, kind, d in self.params)
@@ -349,6 +414,15 @@ def _osl_default(kind: str, d) -> str:
     if kind == "float":
         return _num(d)
     return "{}({})".format(_osl_type(kind), ", ".join(_num(x) for x in d))
+
+
+def fresnel_at_view(b, color, eta):
+    """Blender 4.2's node group (no Metallic BSDF node) for a Beckmann reflection with the dielectric Fresnel per
+    microfacet: the colour times F(cos θo, η) at h = the shading normal (exact at the mirror configuration; far too
+    bright for rough lobes seen at grazing angles). [approx: fresnel-at-view-blender-4.2]"""
+    from .micrograin import fresnel_dielectric
+
+    return b.scale(color, fresnel_dielectric(b, b.cos_view(), eta))
 
 
 def schlick_at_view(b, color, f0, normal):

@@ -5,41 +5,47 @@ import math
 
 import bpy
 
-from .expr import BULK_INPUT, MIN_COS, MIN_LOG, MIN_TANGENT, schlick_at_view
+from .expr import BULK_INPUT, MAX_MIX_WEIGHT, MIN_COS, MIN_LOG, MIN_TANGENT, fresnel_at_view, schlick_at_view
 
 COLUMN = 190
 ROW = 150
 
 
 class NodeValue:
-    """An output socket (float or colour) plus its column in the layout."""
+    """An output socket (float or colour) plus its column in the layout. Arithmetic with a value of another type
+    (not a number, tuple or NodeValue) is left to that value (``NotImplemented``)."""
 
     def __init__(self, backend: "NodeBackend", socket, kind: str, depth: int):
         self.b, self.socket, self.kind, self.depth = backend, socket, kind, depth
 
+    def _op(self, op, o, swap=False):
+        if not isinstance(o, (NodeValue, int, float, tuple, list)):
+            return NotImplemented
+        return self.b.binary(op, o, self) if swap else self.b.binary(op, self, o)
+
     def __add__(self, o):
-        return self.b.binary("ADD", self, o)
+        return self._op("ADD", o)
 
     def __radd__(self, o):
-        return self.b.binary("ADD", o, self)
+        return self._op("ADD", o, True)
 
     def __sub__(self, o):
-        return self.b.binary("SUBTRACT", self, o)
+        return self._op("SUBTRACT", o)
 
     def __rsub__(self, o):
-        return self.b.binary("SUBTRACT", o, self)
+        return self._op("SUBTRACT", o, True)
 
     def __mul__(self, o):
-        return self.b.binary("MULTIPLY", self, o)
+        return self._op("MULTIPLY", o)
 
     def __rmul__(self, o):
-        return self.b.binary("MULTIPLY", o, self)
+        return self._op("MULTIPLY", o, True)
 
     def __truediv__(self, o):
-        return self.b.binary("DIVIDE", self, o)
+        return self._op("DIVIDE", o)
 
     def __rtruediv__(self, o):
-        return self.b.binary("DIVIDE", o, self)
+        return self._op("DIVIDE", o, True)
 
     def __neg__(self):
         return self.b.binary("MULTIPLY", self, -1.0)
@@ -56,6 +62,8 @@ def _depth(*values) -> int:
 
 
 class NodeBackend:
+    form = "nodes"
+
     def __init__(self, tree: bpy.types.NodeTree, group_input, group_output):
         self.tree = tree
         self.nodes = tree.nodes
@@ -82,7 +90,8 @@ class NodeBackend:
         if isinstance(value, NodeValue):
             self.links.new(value.socket, socket)
         elif isinstance(value, (tuple, list)):
-            socket.default_value = tuple(value)[: len(socket.default_value)]
+            n = len(socket.default_value)
+            socket.default_value = (tuple(float(x) for x in value) + (1.0,) * n)[:n]  # RGB into RGBA: alpha 1
         else:
             socket.default_value = float(value) if not hasattr(socket.default_value, "__len__") else (value,) * 3
 
@@ -117,6 +126,10 @@ class NodeBackend:
 
     def normal(self):
         return NodeValue(self, self.geometry()[0], "color", 1)
+
+    def view(self):
+        """The unit view direction ωo: the Geometry node's Incoming."""
+        return NodeValue(self, self.geometry()[1], "color", 1)
 
     def backfacing(self):
         return NodeValue(self, self.geometry()[3], "float", 1)
@@ -165,25 +178,51 @@ class NodeBackend:
             self._link_or_set(value, socket)
         return NodeValue(self, node.outputs[out], "float" if out == "Value" else "color", _depth(*args))
 
+    def _per_channel(self, fn, x):
+        """``fn`` of a float, or of each channel of a colour (Separate XYZ, three Math nodes, Combine XYZ)."""
+        if _kind(x) != "color":
+            return fn(x)
+        if not isinstance(x, NodeValue):
+            x = tuple(x)
+            sep = None
+        else:
+            sep = self._node("ShaderNodeSeparateXYZ", _depth(x))
+            self._link_or_set(x, sep.inputs[0])
+        parts = [fn(NodeValue(self, sep.outputs[i], "float", _depth(x)) if sep else x[i]) for i in range(3)]
+        comb = self._node("ShaderNodeCombineXYZ", _depth(*parts))
+        for value, socket in zip(parts, comb.inputs):
+            self._link_or_set(value, socket)
+        return NodeValue(self, comb.outputs[0], "color", _depth(*parts))
+
     def exp(self, x):
-        return self._math("EXPONENT", x)
+        return self._per_channel(lambda v: self._math("EXPONENT", v), x)
 
     def log(self, x):
-        return self._math("LOGARITHM", self.maximum(x, MIN_LOG), math.e)
+        return self._per_channel(lambda v: self._math("LOGARITHM", self.maximum(v, MIN_LOG), math.e), x)
 
     def sqrt(self, x):
-        return self._math("SQRT", self.maximum(x, 0.0))
+        return self._per_channel(lambda v: self._math("SQRT", self.maximum(v, 0.0)), x)
 
     def abs(self, x):
-        return self._math("ABSOLUTE", x)
+        return self._per_channel(lambda v: self._math("ABSOLUTE", v), x)
+
+    def cos(self, x):
+        return self._math("COSINE", x)
+
+    def acos(self, x):
+        return self._math("ARCCOSINE", x)  # Cycles' safe_acosf clamps to [-1, 1]
 
     def step_below(self, x, edge):
         return self._math("LESS_THAN", x, edge)
 
     def maximum(self, a, b):
+        if "color" in (_kind(a), _kind(b)):
+            return self._vector("MAXIMUM", _as_color(a), _as_color(b))
         return self._math("MAXIMUM", a, b)
 
     def minimum(self, a, b):
+        if "color" in (_kind(a), _kind(b)):
+            return self._vector("MINIMUM", _as_color(a), _as_color(b))
         return self._math("MINIMUM", a, b)
 
     def scale(self, color, s):
@@ -272,6 +311,42 @@ class NodeBackend:
             self._link_or_set(part, mix.inputs["Fac"])
             self.links.new(metal.outputs[0], mix.inputs[2])
             self._add(mix.outputs[0], max(_depth(part), depth) + 1)
+
+    def beckmann(self, color, alpha, eta=None):
+        """Beckmann reflection around the shading normal. Without ``eta``: a Glossy BSDF (Beckmann, no Fresnel). With
+        ``eta`` (the dielectric Fresnel per microfacet; ``color`` must be grey): Blender 4.3+'s Metallic BSDF (Beckmann,
+        physical conductor of IOR η and extinction 0, whose Fresnel is then the dielectric one) scaled by Mix and Add
+        Shaders (``_scaled``); Blender 4.2 has no such node: a Glossy BSDF whose colour takes F at the view
+        (``fresnel_at_view``)."""
+        if eta is None or not hasattr(bpy.types, "ShaderNodeBsdfMetallic"):
+            if eta is not None:
+                color = fresnel_at_view(self, color, eta)
+            self._closure("ShaderNodeBsdfGlossy", {"Color": color, "Roughness": self._roughness(alpha)},
+                          distribution="BECKMANN")
+            return
+        depth = _depth(color, alpha, eta) + 1
+        metal = self._node("ShaderNodeBsdfMetallic", depth, distribution="BECKMANN", fresnel_type="PHYSICAL_CONDUCTOR")
+        for name, value in {"Roughness": self._roughness(alpha), "IOR": eta, "Extinction": (0.0, 0.0, 0.0)}.items():
+            self._link_or_set(value, metal.inputs[name])
+        gray = self._vector("DOT_PRODUCT", color, (1.0 / 3.0,) * 3, out="Value") if _kind(color) == "color" else color
+        self._scaled(metal.outputs[0], gray, depth)
+
+    def _scaled(self, shader_socket, weight, depth):
+        """The closure ``shader_socket`` times a weight in [0, MAX_MIX_WEIGHT]: Mix Shaders (whose factor Cycles clamps
+        to [0, 1]) with factors min(max(w − j, 0), 1), j = 0, 1, ..., summed (Cycles sums the weights of every path to a
+        closure; a doubling tree of Add Shaders would be exponential in Cycles' weight transform)."""
+        for j in range(MAX_MIX_WEIGHT):
+            part = self.minimum(self.maximum(weight - float(j), 0.0), 1.0) if j else self.minimum(weight, 1.0)
+            d = max(_depth(part), depth) + 1
+            mix = self._node("ShaderNodeMixShader", d)
+            self._link_or_set(part, mix.inputs["Fac"])
+            self.links.new(shader_socket, mix.inputs[2])
+            self._add(mix.outputs[0], d)
+
+    def beckmann_refraction(self, color, alpha, ior, normal):
+        """Refraction BSDF (Beckmann, no Fresnel) around ``normal`` (a direction)."""
+        self._closure("ShaderNodeBsdfRefraction", {"Color": color, "Roughness": self._roughness(alpha), "IOR": ior,
+                                                   "Normal": normal}, distribution="BECKMANN")
 
     def dielectric(self, color, alpha, ior):
         self._closure("ShaderNodeBsdfGlass", {"Color": color, "Roughness": self._roughness(alpha), "IOR": ior},
