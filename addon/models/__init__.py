@@ -1,4 +1,4 @@
 """bpy-free model declarations. ``MODELS`` maps a model id to its declaration module."""
-from . import micrograin, spongecake
+from . import micrograin, spongecake, thin_coat
 
-MODELS = {spongecake.ID: spongecake, micrograin.ID: micrograin}
+MODELS = {spongecake.ID: spongecake, micrograin.ID: micrograin, thin_coat.ID: thin_coat}

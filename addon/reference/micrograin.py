@@ -515,18 +515,35 @@ def _bulk_eval(bulk: Bulk, wi, wo):
     return _bulk_model(bulk).eval(bulk.params, wi, wo)
 
 
+def samples_from_view(model) -> bool:
+    """Whether a model bulk's reference samples the light direction given the view (its module sets
+    ``SAMPLES_FROM_VIEW = True``: ``sample(p, wo, u) -> Sample(wi, ...)``, ``pdf(p, wi, wo)`` the density of wi
+    given wo, e.g. the thin coat, which is built from the view) instead of the other models' ``sample(p, wi, u)
+    -> Sample(wo, ...)`` with ``pdf(p, wi, wo)`` the density of wo given wi. This layer samples "the other
+    direction given the one it holds" either way: a view-built bulk gets the held direction as its view and its
+    pdf with the arguments exchanged, so the density is always that of what was drawn."""
+    return bool(getattr(model, "SAMPLES_FROM_VIEW", False))
+
+
 def _bulk_pdf(bulk: Bulk, wi, wo):
+    """Density of ``_bulk_sample``'s wo given wi."""
     if bulk.type in SIMPLE_BULKS:
         return spongecake.substrate_pdf(bulk.params, wi, wo)
-    return _bulk_model(bulk).pdf(bulk.params, wi, wo)
+    model = _bulk_model(bulk)
+    if samples_from_view(model):
+        return model.pdf(bulk.params, wo, wi)
+    return model.pdf(bulk.params, wi, wo)
 
 
 def _bulk_sample(bulk: Bulk, wi, u):
-    """Directions from the bulk's own sampler, and which of them are Diracs (model bulks only)."""
+    """Directions wo from the bulk's own sampler given wi, and which of them are Diracs (model bulks only); a bulk
+    that samples from the view (``samples_from_view``) is handed wi as its view."""
     if bulk.type in SIMPLE_BULKS:
         return spongecake.substrate_sample(bulk.params, wi, u[:, 0], u[:, 1], u[:, 2]), np.zeros(len(wi), bool)
-    s = _bulk_model(bulk).sample(bulk.params, wi, u)
-    return s.wo, getattr(s, "is_delta", np.zeros(len(wi), bool))
+    model = _bulk_model(bulk)
+    s = model.sample(bulk.params, wi, u)
+    drawn = s.wi if samples_from_view(model) else s.wo
+    return drawn, getattr(s, "is_delta", np.zeros(len(wi), bool))
 
 
 # --------------------------------------------------------------------------------------------- public
