@@ -49,6 +49,15 @@ def build_parser() -> argparse.ArgumentParser:
     cp.add_argument("--blends", action="store_true",
                     help="micrograin: also render the reference with the linear mix by the filling factor (Fig. 14) "
                          "and d'Eon et al.'s weighting (Eq. 26), side by side with ours")
+    cp.add_argument("--principled", action="store_true",
+                    help="thin_coat: also render Blender's Principled BSDF coat set up from the same parameters "
+                         "and report its error against the reference beside Lamina's")
+    cp.add_argument("--truth", action="store_true",
+                    help="thin_coat: also measure the reference and Cycles against a Monte Carlo simulation of the "
+                         "coat's light paths at sampled pixels")
+    cp.add_argument("--truth-paths", type=int, default=2000, help="with --truth: paths per sampled pixel")
+    cp.add_argument("--truth-stride", type=int, default=4,
+                    help="with --truth: Monte Carlo at every n-th row and column (errors use those pixels)")
 
     dm = sub.add_parser("demo", help="compare every preset and write index.html")
     dm.add_argument("--model", default="spongecake", choices=sorted(MODELS))
@@ -93,20 +102,21 @@ def _material_args(p) -> None:
     p.add_argument("--model", default="spongecake", choices=sorted(MODELS))
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--preset", help="a preset name (see list-presets)")
-    g.add_argument("--params", help="a JSON file with the model's parameter dict")
+    g.add_argument("--params", "--json", dest="params", help="a JSON file with the model's parameter dict")
     p.add_argument("--form", default="nodes", choices=FORMS)
 
 
 def _compare_args(p) -> None:
     p.add_argument("--forms", default=",".join(FORMS), help=f"comma-separated: {', '.join(FORMS)}")
-    p.add_argument("--scenes", default=",".join(SCENES), help=f"comma-separated: {', '.join(SCENES)}")
+    p.add_argument("--scenes", help=f"comma-separated: {', '.join(SCENES)} (default: all of them; backlit only "
+                                    "for materials that transmit light)")
     p.add_argument("--samples", type=int, default=128, help="Cycles samples per pixel")
     p.add_argument("--resolution", type=int, default=96, help="image width and height in pixels")
     p.add_argument("--seed", type=int, default=0)
 
 
 def load_params(args):
-    data = _read_dict(args.model, args.preset, args.params, "--params")
+    data = _read_dict(args.model, args.preset, args.params, "--params/--json")
     return _validated(MODELS[args.model], data).params
 
 
@@ -148,18 +158,22 @@ def _split(value: str, allowed, what: str) -> list[str]:
     return items
 
 
-def _check_compare_args(args) -> tuple[list[str], list[str]]:
+def _check_compare_args(args) -> tuple[list[str], list[str] | None]:
+    """The forms and the scenes (None: the material's default scenes, ``compare_run.default_scene_names``)."""
     if args.samples < 1 or args.resolution < 8:
         raise CliError("--samples must be ≥ 1 and --resolution ≥ 8")
-    return _split(args.forms, FORMS, "form"), _split(args.scenes, SCENES, "scene")
+    scenes = None if args.scenes is None else _split(args.scenes, SCENES, "scene")
+    return _split(args.forms, FORMS, "form"), scenes
 
 
 # -------------------------------------------------------------------------------------------- commands
 
 
 def cmd_list_presets(args) -> int:
-    for name in presets.names(args.model):
-        print(f"{name:16s} {presets.description(args.model, name)}")
+    names = presets.names(args.model)
+    width = max([16] + [len(n) for n in names])
+    for name in names:
+        print(f"{name:{width}s} {presets.description(args.model, name)}")
     return 0
 
 
@@ -187,11 +201,29 @@ def cmd_compare(args) -> int:
         raise CliError(reason)
     if args.blends and not compare_run.has_blends(args.model):
         raise CliError(f"--blends: model {args.model} has a single blending weight")
+    if args.principled and not compare_run.has_principled(args.model):
+        raise CliError(f"--principled: model {args.model} has no Principled BSDF counterpart (thin_coat has)")
+    truth = _truth_settings(args) if args.truth else None
     report = compare_run.compare_params(args.model, p, forms, scenes, args.samples, args.resolution, args.seed,
                                         os.path.abspath(args.out), label=args.preset or "custom", ms=ms,
-                                        blends=args.blends)
+                                        blends=args.blends, principled=args.principled, truth=truth)
     print(compare_run.summary_lines(report))
     return 0
+
+
+def _truth_settings(args):
+    """The Monte Carlo settings of ``compare --truth`` (thin coats, where the ground truth is installed)."""
+    from .operators import compare_run
+
+    if args.model != "thin_coat":
+        raise CliError(f"--truth: model {args.model} has no path-traced ground truth here (thin_coat has; "
+                       f"SpongeCake's Monte Carlo comparison is --ms)")
+    if not compare_run.has_truth(args.model):
+        raise CliError("--truth: the thin coat's Monte Carlo ground truth (addon/reference/thin_coat_truth.py) "
+                       "is not installed")
+    if args.truth_paths < 16 or args.truth_stride < 1:
+        raise CliError("--truth-paths must be ≥ 16 and --truth-stride ≥ 1")
+    return compare_run.CoatTruth(paths=args.truth_paths, stride=args.truth_stride, seed=args.seed)
 
 
 def _ms_settings(args, p):

@@ -32,6 +32,20 @@ class LaminaCompareSettings(bpy.types.PropertyGroup):
         description="Porous layers: also render the reference with a plain linear mix by the filling factor (the "
                     "paper's Fig. 14) and with d'Eon et al.'s weighting (Eq. 26), beside the view- and "
                     "light-dependent weight")
+    principled: bpy.props.BoolProperty(
+        name="Principled coat", default=True,
+        description="Thin coats: also render Blender's Principled BSDF coat set up from the same roughness, IOR, "
+                    "absorption and base (what you would otherwise use) and measure it against the reference")
+    truth: bpy.props.BoolProperty(
+        name="Monte Carlo ground truth", default=False,
+        description="Thin coats: also measure the reference, Cycles (and the Principled coat) against a Monte "
+                    "Carlo simulation of the coat's light paths at sampled pixels (slower)")
+    truth_paths: bpy.props.IntProperty(
+        name="Monte Carlo paths", default=2000, min=16, max=1_000_000,
+        description="Paths per sampled pixel of the thin coat's ground truth")
+    truth_stride: bpy.props.IntProperty(
+        name="Monte Carlo stride", default=4, min=1, max=16,
+        description="The ground truth runs at every n-th row and column; errors use those pixels")
     last_report: bpy.props.StringProperty(name="Last report", default="")
 
 
@@ -50,7 +64,8 @@ class LAMINA_OT_compare(bpy.types.Operator):
     def _start(self, context):
         settings = context.window_manager.lamina_compare
         self._mat = context.material
-        self._scenes = list(compare_run.SCENES) if settings.scene == "ALL" else [settings.scene]
+        _, p = lamina_material.current_params(self._mat)
+        self._scenes = compare_run.default_scene_names(p) if settings.scene == "ALL" else [settings.scene]
         self._done = []
         self._cache = {}
         # Blender's session temp folder: removed when Blender exits; the picture shown is packed into the file
@@ -123,9 +138,13 @@ class LAMINA_OT_compare(bpy.types.Operator):
 
             ms = TruthSettings(paths=settings.ms_paths, albedo_paths=2 * settings.ms_paths, stride=settings.ms_stride)
         blends = settings.blends and compare_run.has_blends(model_id)
+        principled = settings.principled and compare_run.has_principled(model_id)
+        truth = None
+        if settings.truth and compare_run.has_truth(model_id):
+            truth = compare_run.CoatTruth(paths=settings.truth_paths, stride=settings.truth_stride)
         self._done.append(compare_run.compare_material(self._mat, [scene], settings.samples, settings.resolution,
                                                        0, self._out, reference_cache=self._cache, ms=ms,
-                                                       blends=blends))
+                                                       blends=blends, principled=principled, truth=truth))
         context.window_manager.progress_update(len(self._done))
         return True
 

@@ -8,6 +8,11 @@ With multiple scattering (``ms``: an ``addon.ms_truth.TruthSettings``) a run com
 single scattering alone (the closed-form reference), SS + MS from the network (the material with the flag on,
 rendered by Cycles and by the reference) and SS + MS from Monte Carlo (the closed-form single scattering plus
 the random walk's orders >= 2 at sampled pixels, ``addon.ms_truth``). The entries gain an ``ms`` dict.
+
+Thin coats can also be compared with what an artist would otherwise use, Blender's Principled BSDF coat set up
+from the same parameters (``principled``: ``principled_coat``; entries gain a ``principled`` dict), and with the
+Monte Carlo ground truth of the coat's light paths at sampled pixels (``truth``: a ``CoatTruth``, when
+``reference.thin_coat_truth`` is installed; entries gain a ``truth`` dict).
 """
 from __future__ import annotations
 
@@ -15,6 +20,8 @@ import html
 import importlib
 import json
 import os
+import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -26,6 +33,7 @@ from ..nodes import predicted_image
 from ..reference import metrics
 from ..reference import scenes as ref_scenes
 from . import blend_io, compare_core
+from . import principled_coat as principled_mapping
 
 SCENES = ref_scenes.KINDS
 
@@ -59,6 +67,53 @@ def has_blends(model_id: str) -> bool:
     return hasattr(reference_module(model_id), "BLENDS")
 
 
+def principled_coat(p, name: str = "Lamina Principled coat"):
+    """A new material: Blender's Principled BSDF coat set up from thin-coat parameters ``p``
+    (``operators.principled_coat.settings``: what an artist would otherwise use)."""
+    return principled_mapping.new_material(p, name)
+
+
+def has_principled(model_id: str) -> bool:
+    """Whether the model has a Principled BSDF counterpart to render beside it (``principled_coat``)."""
+    return principled_mapping.supports(model_id)
+
+
+def truth_module(model_id: str):
+    """The model's Monte Carlo ground truth of its light paths (``reference.<model>_truth`` with
+    ``ground_truth`` and ``ground_truth_albedo``), or None where there is none."""
+    if model_id != "thin_coat":
+        return None
+    try:
+        module = importlib.import_module(f"..reference.{model_id}_truth", __package__)
+    except ImportError:
+        return None
+    return module if all(hasattr(module, f) for f in ("ground_truth", "ground_truth_albedo")) else None
+
+
+def has_truth(model_id: str) -> bool:
+    return truth_module(model_id) is not None
+
+
+def default_scene_names(p) -> list[str]:
+    """The standard scenes worth rendering for ``p``: all of them, but the backlit one only for parameters that
+    transmit (a thin coat over a base shows nothing there)."""
+    return [s for s in SCENES if s != "backlit" or getattr(p, "transmits", True)]
+
+
+@dataclass(frozen=True)
+class CoatTruth:
+    """How much Monte Carlo the thin coat's ground truth gets: ``paths`` per sampled pixel (one call of
+    ``ground_truth`` per pixel: every pixel has its own view), every ``stride``-th row and column."""
+
+    paths: int = 2000
+    stride: int = 4
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.paths < 16 or self.stride < 1:
+            raise ValueError(f"bad ground-truth settings {self!r}: paths >= 16, stride >= 1")
+
+
 # Samples per pixel of the reference's directional albedo (furnace scene): ~0.7% relative noise.
 ALBEDO_SAMPLES = 4096
 
@@ -71,7 +126,7 @@ def reference_functions(model_id: str, p):
 
 def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_dir: str, progress=None,
                      reference_cache: dict | None = None, ms: ms_truth.TruthSettings | None = None,
-                     blends: bool = False) -> dict:
+                     blends: bool = False, principled: bool = False, truth: CoatTruth | None = None) -> dict:
     """Cycles vs reference for an existing Lamina material (it is assigned to temporary objects, never edited).
     ``scenes``: names of standard scenes (at ``resolution``) or ``Scene`` objects.
     ``reference_cache`` lets several forms of the same parameters share the reference renders (and, with ``ms``,
@@ -79,7 +134,9 @@ def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_
     ``blends``: also render the reference with the model's other blending weights (micrograin: the linear mix by
     τ0 of the paper's Fig. 14 and d'Eon et al.'s weighting, Eq. 26) beside ours (``blend_comparison``).
     ``ms``: compare with multiple scattering (module docstring). A material whose flag is off is compared
-    through a temporary copy with the flag on, removed again afterwards."""
+    through a temporary copy with the flag on, removed again afterwards.
+    ``principled``: also render Blender's Principled coat set up from the parameters (``principled_comparison``);
+    ``truth``: also measure against the Monte Carlo ground truth at sampled pixels (``truth_comparison``)."""
     model_id, p = lamina_material.current_params(mat)
     if ms is not None and not p.multiple_scattering:
         p_on = with_multiple_scattering(model_id, p)
@@ -88,7 +145,7 @@ def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_
             tmp = lamina_material.new_material(model_id, p_on, lamina_material.form_of(mat),
                                                name=f"{mat.name} (multiple scattering)")
             return compare_material(tmp, scenes, samples, resolution, seed, out_dir, progress, reference_cache, ms,
-                                    blends)
+                                    blends, principled, truth)
         finally:
             blend_io.remove_new_data(before)
     bsdf_eval, bsdf_albedo = reference_functions(model_id, p)
@@ -107,7 +164,159 @@ def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_
         if blends:
             cycles = read_exr(report[spec.name]["files"]["cycles"], "RGB")
             report[spec.name]["blends"] = blend_comparison(model_id, p, spec, cycles, reference, out_dir, cache)
+        if principled:
+            cycles = read_exr(report[spec.name]["files"]["cycles"], "RGB")
+            report[spec.name]["principled"] = principled_comparison(
+                model_id, p, spec, cycles, reference, report[spec.name]["samples"], seed, out_dir, cache)
+        if truth is not None:
+            cycles = read_exr(report[spec.name]["files"]["cycles"], "RGB")
+            principled_image = (read_exr(report[spec.name]["principled"]["files"]["principled"], "RGB")
+                                if principled else None)
+            report[spec.name]["truth"] = truth_comparison(model_id, p, spec, cycles, reference, truth, out_dir, cache,
+                                                          principled_image)
     return report
+
+
+def principled_comparison(model_id: str, p, spec, cycles, reference, samples: int, seed: int, out_dir: str,
+                          cache: dict) -> dict:
+    """Blender's Principled BSDF coat set up from ``p`` (``operators.principled_coat.settings``), rendered by Cycles on the
+    same scene with the same samples and seed (once per scene: it does not depend on the form), against the
+    reference: its relative RMSE beside the form's, ``<scene>_principled.exr`` and ``<scene>_principled.png`` =
+    Lamina (Cycles) | reference | Principled coat | error Lamina | error Principled (one exposure, one heat
+    scale)."""
+    if not has_principled(model_id):
+        raise ValueError(f"{model_id} has no Principled BSDF counterpart")
+    stem = compare_core.safe_file_stem(spec.name)
+    files = {"principled": os.path.join(out_dir, f"{stem}_principled.exr"),
+             "principled_picture": os.path.join(out_dir, f"{stem}_principled.png")}
+    key = f"{spec.name}/principled"
+    if key not in cache:
+        from .cycles_render import render_cycles
+
+        before = blend_io.snapshot()
+        try:
+            mat = principled_coat(p, name="Lamina compare Principled coat")
+            cache[key] = render_cycles(mat, spec, samples, seed, files["principled"])
+        finally:
+            blend_io.remove_new_data(before)
+    image, seconds = cache[key]
+    write_exr(files["principled"], image)
+    mask = ref_scenes.scene_mask(spec)
+    write_png(files["principled_picture"], comparison_picture([cycles, reference, image], reference, mask))
+    return {
+        "rel_rmse": metrics.rel_rmse(image, reference, mask),
+        "rmse": metrics.rmse(image, reference, mask),
+        "max_abs_error": metrics.max_abs_error(image, reference, mask),
+        "lamina_rel_rmse": metrics.rel_rmse(cycles, reference, mask),
+        "cycles_seconds": seconds,
+        "settings": {k: list(v) if isinstance(v, tuple) else v for k, v in principled_mapping.settings(p).items()},
+        "panels": list(PRINCIPLED_PANELS),
+        "files": files,
+    }
+
+
+PRINCIPLED_PANELS = ("Lamina (Cycles)", "reference", "Principled coat", "error Lamina", "error Principled")
+
+
+def comparison_picture(images, reference, mask, heat_mask=None, gap: int = 2) -> np.ndarray:
+    """``images`` side by side (uint8) at the reference's exposure, then the error map of every image but the
+    reference itself (those not ``reference``) against it, one heat scale (10% of the reference's mean);
+    ``heat_mask`` limits the error maps (default ``mask``)."""
+    heat_mask = mask if heat_mask is None else heat_mask
+    exposure = metrics.auto_exposure(reference, mask)
+    panels = [metrics.tonemap(x, exposure) for x in images]
+    vmax = None
+    for x in images:
+        if x is reference:
+            continue
+        heat, vmax = metrics.heat_map(x, reference, heat_mask, vmax=vmax)
+        panels.append(np.round(heat * 255).astype(np.uint8))
+    sep = np.full((panels[0].shape[0], gap, 3), 255, dtype=np.uint8)
+    return np.concatenate([x for panel in panels for x in (panel, sep)][:-1], axis=1)
+
+
+def coat_truth_image(model_id: str, p, spec, settings: CoatTruth) -> dict:
+    """The Monte Carlo ground truth of ``spec`` at sampled pixels (``ms_truth.sampled_pixels``): per pixel, the
+    sum over orders of ``ground_truth(p, wi, wo)`` times the sun's irradiance and |cos θi| (a closed sphere blocks
+    light from below its surface, like ``scenes.reference_image``), or for the furnace the environment times
+    ``ground_truth_albedo``'s reflected and transmitted energy. Returns ``image`` (H x W x 3, the nearest sample's
+    value elsewhere, for pictures only), ``noise`` (standard error, 0 off the samples), ``samples`` (H x W bool),
+    ``seconds``."""
+    truth = truth_module(model_id)
+    t0 = time.perf_counter()
+    g = ref_scenes.pixel_geometry(spec)
+    h, w = spec.height, spec.width
+    samples = ms_truth.sampled_pixels(spec, settings.stride)
+    rows, cols = np.nonzero(samples)
+    wo_l = ref_scenes.to_local(g["wo"][rows, cols], g["t"][rows, cols], g["b"][rows, cols], g["n"][rows, cols])
+    value = np.zeros((len(rows), 3))
+    var = np.zeros((len(rows), 3))
+    for j in range(len(rows)):
+        seed = int(np.random.SeedSequence([settings.seed, j]).generate_state(1)[0])
+        if spec.kind == "furnace":
+            a = truth.ground_truth_albedo(p, wo_l[j], n_paths=settings.paths, seed=seed)
+            value[j] = spec.environment * (a["reflection"].sum(axis=0) + a["transmission"].sum(axis=0))
+            se = a["stderr"]["reflection"] ** 2 + a["stderr"]["transmission"] ** 2
+            var[j] = spec.environment ** 2 * se.sum(axis=0)
+            continue
+        r, c = rows[j], cols[j]
+        for sun in spec.suns:
+            wi = ref_scenes.to_local(np.asarray(sun.direction, dtype=float), g["t"][r, c], g["b"][r, c], g["n"][r, c])
+            cos_i = abs(wi[2]) if (wi[2] > 0.0 or spec.kind != "sphere") else 0.0
+            if cos_i == 0.0:
+                continue
+            f, se = truth.ground_truth(p, wi[None], wo_l[j], n_paths=settings.paths, seed=seed)
+            value[j] += f.sum(axis=0)[0] * cos_i * sun.irradiance
+            var[j] += (se[:, 0] ** 2).sum(axis=0) * (cos_i * sun.irradiance) ** 2
+    image = np.zeros((h, w, 3))
+    noise = np.zeros((h, w, 3))
+    image[rows, cols], noise[rows, cols] = value, np.sqrt(var)
+    hit = np.argwhere(g["hit"])
+    if len(rows):
+        nearest = ms_truth._nearest(hit.astype(float), np.stack([rows, cols], axis=1).astype(float))
+        image[hit[:, 0], hit[:, 1]] = value[nearest]
+        image[rows, cols] = value
+    return {"image": image, "noise": noise, "samples": samples, "seconds": time.perf_counter() - t0}
+
+
+TRUTH_PANELS = ("Lamina (Cycles)", "reference", "Monte Carlo", "error Lamina", "error reference")
+
+
+def truth_comparison(model_id: str, p, spec, cycles, reference, settings: CoatTruth, out_dir: str, cache: dict,
+                     principled=None) -> dict:
+    """The form (Cycles), the analytic reference and (given) the Principled coat against the Monte Carlo ground
+    truth of the same light paths (``coat_truth_image``; the same number of bounces), over its sampled pixels:
+    relative RMSEs, its noise on the same scale, ``<scene>_ground_truth.exr`` and ``<scene>_truth.png``
+    (``TRUTH_PANELS``: error maps over the sampled pixels)."""
+    if not has_truth(model_id):
+        raise ValueError(f"no Monte Carlo ground truth for {model_id} (reference.{model_id}_truth)")
+    key = f"{spec.name}/coat truth"
+    if key not in cache or cache[key][1] != settings:
+        cache[key] = (coat_truth_image(model_id, p, spec, settings), settings)
+    mc = cache[key][0]
+    samples = mc["samples"]
+    stem = compare_core.safe_file_stem(spec.name)
+    files = {"ground_truth": os.path.join(out_dir, f"{stem}_ground_truth.exr"),
+             "truth_picture": os.path.join(out_dir, f"{stem}_truth.png")}
+    write_exr(files["ground_truth"], mc["image"])
+    mask = ref_scenes.scene_mask(spec)
+    images = [cycles, reference, mc["image"]]
+    picture = comparison_picture(images, mc["image"], mask, heat_mask=samples)
+    write_png(files["truth_picture"], picture)
+    out = {
+        "cycles_vs_truth": metrics.rel_rmse(cycles, mc["image"], samples),
+        "reference_vs_truth": metrics.rel_rmse(reference, mc["image"], samples),
+        "truth_noise": ms_truth.relative_noise(mc["image"], mc["noise"], samples),
+        "truth_pixels": int(samples.sum()),
+        "truth_paths": settings.paths,
+        "truth_stride": settings.stride,
+        "truth_seconds": mc["seconds"],
+        "panels": list(TRUTH_PANELS),
+        "files": files,
+    }
+    if principled is not None:
+        out["principled_vs_truth"] = metrics.rel_rmse(principled, mc["image"], samples)
+    return out
 
 
 def blend_comparison(model_id: str, p, spec, cycles, reference, out_dir: str, cache: dict) -> dict:
@@ -147,8 +356,6 @@ def ms_comparison(model_id: str, p, spec, cycles, network, settings: ms_truth.Tr
     ``<scene>_ms.png`` (those four pictures, then the error maps network vs Monte Carlo and SS only vs Monte
     Carlo, one exposure and one heat scale = 10% of the ground truth's mean). Errors against the Monte Carlo
     are taken over its sampled pixels only."""
-    import time
-
     if model_id != "spongecake":
         raise ValueError(f"multiple-scattering ground truth exists for spongecake only, not {model_id}")
     p_ss = ms_truth.single_scattering(p)
@@ -202,10 +409,14 @@ def ms_picture(cycles, single, network, truth, mask, gap: int = 2) -> np.ndarray
 
 
 def compare_params(model_id: str, p, forms, scenes, samples: int, resolution: int, seed: int, out_dir: str,
-                   label: str = "custom", ms: ms_truth.TruthSettings | None = None, blends: bool = False) -> dict:
+                   label: str = "custom", ms: ms_truth.TruthSettings | None = None, blends: bool = False,
+                   principled: bool = False, truth: CoatTruth | None = None) -> dict:
     """Build a temporary material per form, compare it, remove it again; write ``report.json``.
     With ``ms`` the materials have multiple scattering on and every scene is also compared with the Monte
-    Carlo ground truth (``compare_material``); ``report["ms"]`` records the ground truth's settings."""
+    Carlo ground truth (``compare_material``); ``report["ms"]`` records the ground truth's settings.
+    ``scenes`` None: ``default_scene_names(p)``. ``principled`` / ``truth``: see ``compare_material``
+    (``report["principled"]`` records the Principled settings, ``report["truth"]`` the ground truth's)."""
+    scenes = default_scene_names(p) if scenes is None else scenes
     if ms is not None:
         p = with_multiple_scattering(model_id, p)
     report = {"model": model_id, "label": label, "params": p.to_dict(), "samples": samples,
@@ -213,13 +424,20 @@ def compare_params(model_id: str, p, forms, scenes, samples: int, resolution: in
     if ms is not None:
         report["ms"] = {"paths": ms.paths, "albedo_paths": ms.albedo_paths, "stride": ms.stride,
                         "max_depth": ms.max_depth, "seed": ms.seed}
+    if principled:
+        report["principled"] = {"settings": {k: list(v) if isinstance(v, tuple) else v
+                                             for k, v in principled_mapping.settings(p).items()},
+                                "mapping": principled_mapping.MAPPING}
+    if truth is not None:
+        report["truth"] = {"paths": truth.paths, "stride": truth.stride, "seed": truth.seed}
     references = {}
     for form in forms:
         before = blend_io.snapshot()
         try:
             mat = lamina_material.new_material(model_id, p, form, name=f"Lamina compare {label}")
             entries = compare_material(mat, scenes, samples, resolution, seed, os.path.join(out_dir, form),
-                                       reference_cache=references, ms=ms, blends=blends)
+                                       reference_cache=references, ms=ms, blends=blends, principled=principled,
+                                       truth=truth)
         finally:
             blend_io.remove_new_data(before)
         report["forms"][form] = {scene: _json_entry(e, out_dir) for scene, e in entries.items()}
@@ -228,7 +446,7 @@ def compare_params(model_id: str, p, forms, scenes, samples: int, resolution: in
 
 
 REPORT_KEYS = ("rmse", "rel_rmse", "max_abs_error", "mapping_rel_rmse", "cycles_seconds", "reference_seconds",
-               "samples", "worst_pixels", "files", "ms", "blends")
+               "samples", "worst_pixels", "files", "ms", "blends", "principled", "truth")
 
 
 def _json_entry(entry: dict, out_dir: str) -> dict:
@@ -236,7 +454,7 @@ def _json_entry(entry: dict, out_dir: str) -> dict:
     out["files"] = {k: os.path.relpath(v, out_dir) for k, v in entry["files"].items()}
     out["worst_pixels"] = [[int(r), int(c), [float(x) for x in a], [float(x) for x in b]]
                            for r, c, a, b in entry["worst_pixels"]]
-    for key in ("ms", "blends"):
+    for key in ("ms", "blends", "principled", "truth"):
         if key in entry:
             out[key] = {**entry[key], "files": {k: os.path.relpath(v, out_dir) for k, v in entry[key]["files"].items()}}
     return out
@@ -253,7 +471,18 @@ def scene_lines(entries: dict) -> list[str]:
         if "blends" in e:
             others = e["blends"]["vs_ours"].items()
             lines.append("  other blends vs ours: " + ", ".join(f"{b} {d:.2%}" for b, d in others))
+        if "principled" in e:
+            lines.append(f"  Principled coat vs reference: rel. RMSE {e['principled']['rel_rmse']:.2%} (Lamina "
+                         f"{e['rel_rmse']:.2%})")
+        if "truth" in e:
+            lines.append("  " + truth_line(e["truth"]))
     return lines
+
+
+def truth_line(t: dict) -> str:
+    principled = f", Principled {t['principled_vs_truth']:.2%}" if "principled_vs_truth" in t else ""
+    return (f"vs Monte Carlo: reference {t['reference_vs_truth']:.2%}, Cycles {t['cycles_vs_truth']:.2%}"
+            f"{principled} (noise {t['truth_noise']:.2%}, {t['truth_pixels']} px x {t['truth_paths']} paths)")
 
 
 def ms_line(m: dict) -> str:
@@ -277,7 +506,8 @@ def show_side_by_side(context, entries: dict, out_dir: str):
 
     first = next(iter(entries.values()))
     path = first["files"]["side_by_side"]
-    for key, picture in (("ms", "ms_picture"), ("blends", "blends_picture")):
+    for key, picture in (("ms", "ms_picture"), ("blends", "blends_picture"), ("truth", "truth_picture"),
+                         ("principled", "principled_picture")):
         if key in first:
             path = first[key]["files"][picture]
     old = bpy.data.images.get("Lamina Compare")
@@ -297,13 +527,14 @@ def show_side_by_side(context, entries: dict, out_dir: str):
 
 
 def demo(forms, scenes, samples: int, resolution: int, seed: int, out_dir: str, model_id: str = "spongecake"):
-    """Compare every preset and write ``index.html`` (what a new user looks at first)."""
+    """Compare every preset and write ``index.html`` (what a new user looks at first). ``scenes`` None: each
+    preset's ``default_scene_names``. A model with a Principled counterpart (thin coats) gets it beside."""
     reports = []
     for name in presets.names(model_id):
         p = MODELS[model_id].params_from_dict(presets.load(model_id, name))
         print(f"lamina: {name}…", flush=True)
         report = compare_params(model_id, p, forms, scenes, samples, resolution, seed, os.path.join(out_dir, name),
-                                label=name)
+                                label=name, principled=has_principled(model_id))
         print(summary_lines(report), flush=True)
         reports.append(report)
     write_text_atomic(os.path.join(out_dir, "index.html"), index_html(reports, model_id))
@@ -326,13 +557,18 @@ def index_html(reports, model_id: str) -> str:
     for r in reports:
         name = r["label"]
         rows.append(f"<h2>{html.escape(name)}</h2><p>{html.escape(presets.description(model_id, name))}</p>")
+        principled = "principled" in r
+        picture = " | ".join(PRINCIPLED_PANELS) if principled else "Cycles | reference | error"
         rows.append("<table><tr><th>form</th><th>scene</th><th>rel. RMSE</th><th>mapping alone</th>"
-                    "<th>Cycles s</th><th>reference s</th><th>Cycles | reference | error</th></tr>")
+                    + ("<th>Principled coat</th>" if principled else "")
+                    + f"<th>Cycles s</th><th>reference s</th><th>{html.escape(picture)}</th></tr>")
         for form, entries in r["forms"].items():
             for scene, e in entries.items():
-                img = html.escape(f"{name}/{e['files']['side_by_side']}")
+                img = e["principled"]["files"]["principled_picture"] if principled else e["files"]["side_by_side"]
+                img = html.escape(f"{name}/{img}")
+                cell = f"<td>{e['principled']['rel_rmse']:.2%}</td>" if principled else ""
                 rows.append(f"<tr><td>{form}</td><td>{scene}</td><td>{e['rel_rmse']:.2%}</td>"
-                            f"<td>{e['mapping_rel_rmse']:.2%}</td><td>{e['cycles_seconds']:.2f}</td>"
+                            f"<td>{e['mapping_rel_rmse']:.2%}</td>{cell}<td>{e['cycles_seconds']:.2f}</td>"
                             f"<td>{e['reference_seconds']:.2f}</td><td><img src=\"{img}\"></td></tr>")
         rows.append("</table>")
     style = ("body{font-family:sans-serif;background:#222;color:#ddd}td,th{padding:4px 8px}"
@@ -341,5 +577,8 @@ def index_html(reports, model_id: str) -> str:
             f"<style>{style}</style></head><body><h1>Lamina: {model_id} presets, Cycles vs reference</h1>"
             f"<p>Samples {reports[0]['samples']}, resolution {reports[0]['resolution']}, seed {reports[0]['seed']}. "
             f"Relative RMSE = RMSE / mean of the reference over the object; 'mapping alone' is the noise-free "
-            f"error of the form's closures against the reference (docs/accuracy.md).</p>"
+            f"error of the form's closures against the reference (docs/accuracy.md)."
+            + (" 'Principled coat' is Blender's Principled BSDF coat set up from the same parameters "
+               f"({html.escape(principled_mapping.MAPPING)}), against the same reference."
+               if "principled" in reports[0] else "") + "</p>"
             + "\n".join(rows) + "</body></html>")

@@ -1,0 +1,118 @@
+"""The headless CLI for thin coats: presets listed, materials written from a preset or a JSON dict, and every bad
+input refused before any work with exit code 2 and one line (``python -m addon.cli``, the same code as
+``blender -c lamina``)."""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from addon import presets
+from addon.models import thin_coat as model
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def lamina(*args):
+    return subprocess.run([sys.executable, "-m", "addon.cli", *args], capture_output=True, text=True, cwd=ROOT,
+                          env=dict(os.environ, PYTHONPATH=ROOT), timeout=300)
+
+
+def _mapping_ready() -> bool:
+    from addon.nodes import MAPPINGS
+
+    return model.ID in MAPPINGS
+
+
+needs_mapping = pytest.mark.skipif(not _mapping_ready(), reason="the thin coat's Cycles mapping is not registered")
+
+
+def test_list_presets_prints_the_six_with_their_descriptions():
+    r = lamina("list-presets", "--model", "thin_coat")
+    assert r.returncode == 0 and r.stderr == ""
+    lines = r.stdout.splitlines()
+    assert [line.split()[0] for line in lines] == presets.names(model.ID)
+    column = {line.index(presets.description(model.ID, line.split()[0])) for line in lines}
+    assert len(column) == 1  # descriptions start in one column, the longest name included
+
+
+@needs_mapping
+@pytest.mark.parametrize("form", ["nodes", "osl"])
+def test_make_material_from_a_preset(tmp_path, form):
+    out = tmp_path / "lacquer.blend"
+    r = lamina("make-material", "--model", "thin_coat", "--preset", "amber_lacquer", "--form", form, "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    assert out.read_bytes()[:7] == b"BLENDER" and [p.name for p in tmp_path.iterdir()] == ["lacquer.blend"]
+
+
+@needs_mapping
+def test_make_material_from_a_json_dict_with_roughness_and_a_clamp_warning(tmp_path):
+    d = {"roughness_top": 0.1, "kappa_bottom": 500, "eta": 1.5, "sigma_a": [0.1, 0.2, 0.4], "depth": 0.5,
+         "bounces": 9, "base": {"type": "conductor"}}
+    (tmp_path / "coat.json").write_text(json.dumps(d))
+    r = lamina("make-material", "--model", "thin_coat", "--json", str(tmp_path / "coat.json"), "--out",
+               str(tmp_path / "coat.blend"))
+    assert r.returncode == 0, r.stderr
+    assert "lamina: warning: thin_coat: bounces: 9 is outside [0, 4], clamped to 4" in r.stderr
+    assert (tmp_path / "coat.blend").read_bytes()[:7] == b"BLENDER"
+
+
+BAD_JSON = [
+    ({"bounces": 1.5}, "thin_coat: bounces: expected a whole number, got 1.5"),
+    ({"kappa_top": 10, "roughness_top": 0.2}, "give either kappa_top or roughness_top"),
+    ({"base": {"type": "wood"}}, "base: expected a dict with type in dielectric_rough, conductor, diffuse, slab"),
+    ({"sigma_a": [0.1, 0.2]}, "sigma_a: expected three numbers"),
+    ({"thickness": 2}, "unknown key(s) thickness"),
+    ([0.1, 0.2], "expected a dict"),
+]
+
+
+@pytest.mark.parametrize("data, reason", BAD_JSON, ids=[r for _, r in BAD_JSON])
+def test_bad_json_exits_2_with_one_line_and_writes_nothing(tmp_path, data, reason):
+    (tmp_path / "coat.json").write_text(json.dumps(data))
+    for command in ("make-material", "compare"):
+        r = lamina(command, "--model", "thin_coat", "--json", str(tmp_path / "coat.json"), "--out",
+                   str(tmp_path / "out"))
+        assert r.returncode == 2, r.stderr
+        assert r.stderr.strip().count("\n") == 0 and reason in r.stderr and r.stderr.startswith("lamina: error: ")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["coat.json"]
+
+
+@pytest.mark.parametrize("args, reason", [
+    (("make-material", "--model", "thin_coat", "--preset", "velvet", "--out", "x.blend"),
+     "unknown thin_coat preset 'velvet'; available: amber_lacquer"),
+    (("make-material", "--model", "thin_coat", "--json", "missing.json", "--out", "x.blend"), "cannot read"),
+    (("compare", "--model", "thin_coat", "--preset", "amber_lacquer", "--ms", "--out", "x"),
+     "--ms: model thin_coat has no multiple scattering"),
+    (("compare", "--model", "thin_coat", "--preset", "amber_lacquer", "--blends", "--out", "x"),
+     "--blends: model thin_coat has a single blending weight"),
+    (("compare", "--model", "spongecake", "--preset", "fabric", "--principled", "--out", "x"),
+     "--principled: model spongecake has no Principled BSDF counterpart"),
+    (("compare", "--model", "spongecake", "--preset", "fabric", "--truth", "--out", "x"), "--truth: model spongecake"),
+    (("compare", "--model", "thin_coat", "--preset", "amber_lacquer", "--scenes", "moon", "--out", "x"),
+     "unknown scene moon"),
+    (("compare", "--model", "thin_coat", "--preset", "amber_lacquer", "--samples", "0", "--out", "x"), "--samples"),
+    (("demo", "--model", "thin_coat", "--forms", "glsl"), "unknown form glsl"),
+])
+def test_bad_arguments_exit_2_with_one_line(tmp_path, args, reason):
+    r = subprocess.run([sys.executable, "-m", "addon.cli", *args], capture_output=True, text=True, cwd=tmp_path,
+                       env=dict(os.environ, PYTHONPATH=ROOT), timeout=300)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.strip().count("\n") == 0 and reason in r.stderr, r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_truth_settings_are_checked_before_any_work(tmp_path):
+    from addon.operators import compare_run
+
+    r = lamina("compare", "--model", "thin_coat", "--preset", "amber_lacquer", "--truth", "--truth-paths", "3",
+               "--out", str(tmp_path / "x"))
+    assert r.returncode == 2 and r.stderr.strip().count("\n") == 0
+    expected = "--truth-paths must be ≥ 16" if compare_run.has_truth(model.ID) else "is not installed"
+    assert expected in r.stderr and not (tmp_path / "x").exists()
+
+
+def test_unknown_model_is_a_usage_error():
+    r = lamina("list-presets", "--model", "velvet")
+    assert r.returncode == 2 and "thin_coat" in r.stderr  # argparse lists the choices
