@@ -8,6 +8,7 @@ classes = (
     material_ops.LAMINA_OT_add_spongecake,
     material_ops.LAMINA_OT_set_form,
     material_ops.LAMINA_OT_add_porous_layer,
+    material_ops.LAMINA_OT_add_thin_coat,
     ms_ops.LAMINA_OT_set_multiple_scattering,
     ms_ops.LAMINA_OT_rebake,
     compare_op.LAMINA_OT_compare,

@@ -2,12 +2,13 @@
 instead of editing the user's: an existing material is never modified, only a slot's link may change."""
 from __future__ import annotations
 
+import math
 import os
 
 import bpy
 
 from .. import presets
-from ..models import micrograin
+from ..models import micrograin, thin_coat
 from ..models import spongecake as model
 from ..models.params import ParamError
 from ..nodes import material as lamina_material
@@ -162,10 +163,13 @@ def _declared(decl, param: str, **overrides):
     """A Blender property from the model's declaration of parameter ``param`` (range, label, description),
     with ``overrides`` (e.g. a dialog default)."""
     prm = next(p for p in decl if p.name == param)
-    kw = {"name": prm.label, "default": prm.default, "min": prm.min, "max": prm.max,
-          "description": prm.description}
+    kw = {"name": prm.label, "default": prm.default, "description": prm.description,
+          **{bound: getattr(prm, bound) for bound in ("min", "max") if getattr(prm, bound) is not None}}
     if prm.kind == "float":
         return bpy.props.FloatProperty(**({"subtype": prm.subtype} if prm.subtype else {}), **{**kw, **overrides})
+    if prm.kind == "int":
+        return bpy.props.IntProperty(**{**kw, **{k: int(v) for k, v in kw.items() if k in ("min", "max")},
+                                        **overrides})
     subtype = "COLOR" if prm.kind == "color" and prm.max == 1.0 else "NONE"
     return bpy.props.FloatVectorProperty(size=3, subtype=subtype, **{**kw, **overrides})
 
@@ -345,3 +349,189 @@ def add_porous_file(blend: str, material: str, data: dict, form: str, out: str,
             raise PorousError(f"could not save {out}")
     return (f"added {mat.name!r} over {source.name!r} in {slots} object slot(s), {source.name!r} kept with a fake "
             f"user"), warnings
+
+
+# ------------------------------------------------------------------------------------------ thin coat
+
+COAT_PRESET_ITEMS = [(CUSTOM, "Custom", "Set the interfaces, the coat and the base below")] + [
+    (n, wrap.label(n), presets.description(thin_coat.ID, n)) for n in presets.names(thin_coat.ID)]
+BASE_ITEMS = [(key, thin_coat.BASE_LABELS[key], description) for key, description in (
+    ("diffuse", "A matte (Lambertian) base under the coat: lacquered wood, glazed ceramic, varnished paint"),
+    ("conductor", "A metal under the coat: varnished or lacquered metal, car paint's metal base"),
+    ("dielectric_rough", "An opaque rough dielectric under the coat (the paper's case): only its Fresnel "
+                         "reflection shows; the light it refracts is absorbed"),
+    ("slab", "No base: a free-standing thin transparent sheet that reflects and transmits (leaves of glass, "
+             "foils, varnish films)"))]
+# Complex IORs (R, G, B at about 650, 550, 450 nm) of common metals, rounded from published tables.
+METALS = {
+    "aluminium": micrograin.CONDUCTORS["aluminium"],
+    "gold": micrograin.CONDUCTORS["gold"],
+    "copper": ((0.271, 0.677, 1.316), (3.609, 2.625, 2.292)),
+    "silver": ((0.159, 0.145, 0.135), (3.929, 3.190, 2.381)),
+}
+METAL_ITEMS = [(k, k.capitalize(), f"A base of {k} (complex IOR, RGB)") for k in METALS] + [
+    (CUSTOM, "Custom", "Set the metal's complex IOR (n, k) below")]
+
+
+def kappa_text(kappa: float) -> str:
+    """κ as the dialog and the panel show it: "κ 200", "κ 20000", "κ 1e+06"."""
+    return f"κ {kappa:.0f}" if kappa < 1e5 else f"κ {kappa:.0e}"
+
+
+def interface_text(p, side: str) -> str:
+    """"roughness α 0.100 (κ 200)" for the top or bottom interface of thin-coat parameters ``p``."""
+    return f"roughness α {getattr(p, f'roughness_{side}'):.3g} ({kappa_text(getattr(p, f'kappa_{side}'))})"
+
+
+def sigma_a_from_color(color) -> list[float]:
+    """The absorption coefficient σa whose transmittance over one unit of depth is ``color``: −ln(color), with
+    black kept finite (σa ≤ the declaration's maximum)."""
+    top = next(p.max for p in thin_coat.LAYER if p.name == "sigma_a")
+    return [top if c <= 0.0 else min(-math.log(float(c)), top) for c in color]
+
+
+class LAMINA_OT_add_thin_coat(bpy.types.Operator):
+    """Add a new Thin Coat material to the active object (a clear or tinted transparent coat, rough on both sides,
+    over a diffuse, metal or dielectric base, or a free-standing thin sheet), from a preset or custom"""
+
+    bl_idname = "lamina.add_thin_coat"
+    bl_label = "Add Thin Coat Material"
+    bl_options = {"REGISTER", "UNDO"}
+
+    preset: bpy.props.EnumProperty(name="Preset", items=COAT_PRESET_ITEMS, default=CUSTOM,
+                                   description="A coat after the paper's Figs. 16 and 18 and common finishes, "
+                                               "or Custom")
+    roughness_top: _declared((thin_coat.ROUGHNESS["top"],), "roughness_top", soft_max=1.0, precision=3)
+    roughness_bottom: _declared((thin_coat.ROUGHNESS["bottom"],), "roughness_bottom", soft_max=1.0, precision=3)
+    eta: _declared(thin_coat.LAYER, "eta")
+    coat_color: bpy.props.FloatVectorProperty(
+        name="Coat Color", size=3, subtype="COLOR", default=(1.0, 1.0, 1.0), min=0.0, max=1.0,
+        description="What is left of light that crosses one unit of depth straight down, exp(-sigma_a) per "
+                    "channel: white is a clear coat; a thicker coat (Depth) looks deeper")
+    depth: _declared(thin_coat.LAYER, "depth")
+    base_type: bpy.props.EnumProperty(name="Base", items=BASE_ITEMS, default="diffuse",
+                                      description="What is under the coat")
+    base_color: _declared(thin_coat.BASE["diffuse"], "albedo")
+    base_ior: _declared(thin_coat.BASE["dielectric_rough"], "ior")
+    metal: bpy.props.EnumProperty(name="Metal", items=METAL_ITEMS, default="aluminium",
+                                  description="What the metal base is made of")
+    metal_ior: _declared(thin_coat.BASE["conductor"], "eta", name="IOR n", default=METALS["aluminium"][0])
+    metal_k: _declared(thin_coat.BASE["conductor"], "k", name="Extinction k", default=METALS["aluminium"][1])
+    bounces: _declared(thin_coat.STACK, "bounces")
+    form: bpy.props.EnumProperty(name="Form", items=FORM_ITEMS, default="nodes")
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        return obj is not None and hasattr(obj.data, "materials")
+
+    def invoke(self, context, event):
+        return context.window_manager.invoke_props_dialog(self, width=380)
+
+    def draw(self, context):
+        layout = self.layout
+        layout.prop(self, "preset")
+        if self.preset != CUSTOM:
+            self._draw_preset(layout.column(align=True))
+        else:
+            self._draw_custom(layout.column())
+        col = layout.column(align=True)
+        col.prop(self, "bounces")
+        col.label(text="0: the top interface only (fastest); each bounce adds a lobe,", icon="INFO")
+        col.label(text="the first carries most of the energy: 2 is usually enough")
+        layout.row().prop(self, "form", expand=True)
+
+    def _draw_preset(self, col) -> None:
+        """The preset's description and values (edit them on the Lamina node afterwards)."""
+        p = thin_coat.params_from_dict(self.coat_dict())
+        col.label(text=presets.description(thin_coat.ID, self.preset), icon="INFO")
+        col.label(text=f"Top: {interface_text(p, 'top')}")
+        if p.base.type != "diffuse":
+            col.label(text=f"Bottom: {interface_text(p, 'bottom')}")
+        sigma_d = ", ".join(f"{s * p.depth:.2g}" for s in p.sigma_a)
+        col.label(text=f"Coat IOR η {p.eta:.2f}; absorption σa·d ({sigma_d})")
+        col.label(text=f"Base: {base_text(p)}")
+        col.label(text="Edit the values on the Lamina node afterwards")
+
+    def _draw_custom(self, col) -> None:
+        col.label(text="Interfaces (roughness α = sqrt(2 / κ))")
+        for side in thin_coat.INTERFACES:
+            split = col.split(factor=0.78)
+            split.enabled = side == "top" or self.base_type != "diffuse"
+            split.prop(self, f"roughness_{side}", slider=True)
+            split.label(text=kappa_text(thin_coat.kappa_from_roughness(getattr(self, f"roughness_{side}"))))
+        if self.base_type == "diffuse":
+            col.label(text="The bottom roughness has no effect over a diffuse base")
+        col.separator()
+        col.prop(self, "eta")
+        col.prop(self, "coat_color")
+        col.prop(self, "depth")
+        tint = ", ".join(f"{c ** (2.0 * self.depth):.2f}" for c in self.coat_color)
+        col.label(text=f"Round trip at normal incidence keeps ({tint})")
+        col.separator()
+        col.prop(self, "base_type")
+        if self.base_type == "diffuse":
+            col.prop(self, "base_color")
+        elif self.base_type == "dielectric_rough":
+            col.prop(self, "base_ior")
+        elif self.base_type == "conductor":
+            col.prop(self, "metal")
+            if self.metal == CUSTOM:
+                col.prop(self, "metal_ior")
+                col.prop(self, "metal_k")
+
+    def coat_dict(self) -> dict:
+        """The thin-coat dict the dialog describes (a preset's or the Custom settings) with the dialog's bounces."""
+        if self.preset != CUSTOM:
+            data = presets.load(thin_coat.ID, self.preset)
+        else:
+            data = {"roughness_top": self.roughness_top, "roughness_bottom": self.roughness_bottom,
+                    "eta": self.eta, "sigma_a": sigma_a_from_color(self.coat_color), "depth": self.depth}
+            base = {"type": self.base_type}
+            if self.base_type == "diffuse":
+                base["albedo"] = list(self.base_color)
+            elif self.base_type == "dielectric_rough":
+                base["ior"] = self.base_ior
+            elif self.base_type == "conductor":
+                ior, k = (self.metal_ior, self.metal_k) if self.metal == CUSTOM else METALS[self.metal]
+                base["eta"], base["k"] = list(ior), list(k)
+            data["base"] = base
+        data = {k: v for k, v in data.items() if k not in ("name", "description")}
+        return {**data, "bounces": self.bounces}
+
+    def execute(self, context):
+        try:
+            validated = thin_coat.validate(self.coat_dict())
+        except ParamError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        for w in validated.warnings:
+            self.report({"WARNING"}, w)
+        name = f"{thin_coat.LABEL} {wrap.label(self.preset)}" if self.preset != CUSTOM else thin_coat.LABEL
+        try:
+            mat = lamina_material.new_material(thin_coat.ID, validated.params, self.form, name=name)
+        except Exception as e:  # noqa: BLE001 - e.g. OSL compile failure: report; nothing was created
+            self.report({"ERROR"}, f"Could not build the Thin Coat material: {type(e).__name__}: {e}")
+            return {"CANCELLED"}
+        assign_to_active_slot(context.active_object, mat)
+        if self.form == "osl" and not context.scene.cycles.shading_system:
+            self.report({"WARNING"}, "OSL form: enable Render Properties > Open Shading Language (CPU or OptiX) "
+                                     "to see it; Lamina does not change scene settings")
+        self.report({"INFO"}, f"Added material {mat.name}")
+        return {"FINISHED"}
+
+
+def base_text(p) -> str:
+    """The base of thin-coat parameters ``p`` in words, with its values."""
+    b = p.base
+    label = thin_coat.BASE_LABELS[b.type]
+    if b.type == "diffuse":
+        return f"{label}, colour ({', '.join(f'{c:.2f}' for c in b.albedo)})"
+    if b.type == "dielectric_rough":
+        return f"{label}, IOR {b.ior:.2f}"
+    if b.type == "conductor":
+        named = next((k for k, (n, k_) in METALS.items()
+                      if all(math.isclose(a, c, rel_tol=1e-3) for a, c in zip(n + k_, tuple(b.eta) + tuple(b.k)))),
+                     None)
+        return f"{label}, {named}" if named else f"{label}, n ({', '.join(f'{c:.2f}' for c in b.eta)})"
+    return label

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import bpy
 
-from ..models import MODELS, micrograin
+from ..models import MODELS, micrograin, thin_coat
 from ..nodes import material as lamina_material
 from ..nodes import wrap
-from ..operators import compare_run
+from ..operators import compare_run, material_ops
 
 
 class LAMINA_PT_main(bpy.types.Panel):
@@ -25,6 +25,7 @@ class LAMINA_PT_main(bpy.types.Panel):
         mat = getattr(context, "material", None)
         col = layout.column(align=True)
         col.operator("lamina.add_spongecake", icon="MATERIAL")
+        col.operator("lamina.add_thin_coat", icon="MATSHADERBALL")
         row = col.row(align=True)
         row.enabled = mat is not None and not wrap.has_porous_layer(mat)  # what the operator's poll says, but visible
         row.operator("lamina.add_porous_layer", icon="MOD_PARTICLES")
@@ -36,6 +37,8 @@ class LAMINA_PT_main(bpy.types.Panel):
         form = lamina_material.form_of(mat)
         if info["model"] == micrograin.ID:
             _draw_micrograin(box, mat)
+        elif info["model"] == thin_coat.ID:
+            _draw_thin_coat(box, mat)
         else:
             box.label(text=f"{mat.name}: {info['model']}, {len(info['params']['layers'])} layer(s)")
         row = box.row(align=True)
@@ -47,6 +50,9 @@ class LAMINA_PT_main(bpy.types.Panel):
             box.label(text="OSL renders only in Cycles with Open Shading Language on", icon="ERROR")
         if info["model"] == micrograin.ID:
             box.label(text="Edit the filling factor and grains on the Lamina node", icon="NODE")
+            return
+        if info["model"] == thin_coat.ID:
+            box.label(text="Edit the coat and the base on the Lamina node", icon="NODE")
             return
         box.label(text="Edit the layer parameters on the Lamina node", icon="NODE")
         if hasattr(MODELS[info["model"]], "MS_MAX_LAYERS"):
@@ -85,6 +91,53 @@ def _draw_micrograin(box, mat) -> None:
     else:
         bulk = getattr(MODELS.get(p.bulk.type), "LABEL", p.bulk.type)
         col.label(text=f"Bulk: {bulk} (node {lamina_material.BULK_NODE})")
+
+
+def _linked_sockets(node, model_id: str, p) -> list:
+    """The Lamina node's sockets (the mapping's ``Socket``: name and declared ``param``) that a link drives."""
+    from ..nodes import MAPPINGS
+
+    if node is None or model_id not in MAPPINGS:
+        return []
+    return [s for s in MAPPINGS[model_id].sockets(p) if s.kind != "shader" and _linked(node, s.name)]
+
+
+def _draw_thin_coat(box, mat) -> None:
+    """A thin coat's summary from the Lamina node's current inputs: base, both interfaces' roughness and κ, η,
+    the absorption σa·d, the bounces, and which inputs textures drive."""
+    try:
+        model_id, p = lamina_material.current_params(mat)
+    except Exception as e:  # noqa: BLE001 - a hand-edited node tree: say so instead of failing to draw
+        box.label(text=f"{mat.name}: thin coat")
+        box.label(text=f"Cannot read the Lamina node: {e}", icon="ERROR")
+        return
+    box.label(text=f"{mat.name}: thin coat over {thin_coat.BASE_LABELS[p.base.type].lower()}")
+    node = lamina_material.shader_node(mat)
+    if node is None:
+        box.label(text="The Lamina node was removed: showing the stored values", icon="ERROR")
+    linked = _linked_sockets(node, model_id, p)
+    base_params = {prm for declared in thin_coat.BASE.values() for prm in declared}
+    driven = {s.param.name for s in linked if s.param not in base_params}  # the coat's own inputs
+    col = box.column(align=True)
+    col.label(text=f"Base: {material_ops.base_text(p)}")
+    for side in thin_coat.INTERFACES:
+        name = side.capitalize()
+        if side == "bottom" and p.base.type == "diffuse":
+            col.label(text="Bottom: no effect over a diffuse base")
+        elif {f"kappa_{side}", f"roughness_{side}"} & driven:
+            col.label(text=f"{name}: roughness texture-driven (κ = 2 / α² per texel)")
+        else:
+            col.label(text=f"{name}: {material_ops.interface_text(p, side)}")
+    col.label(text="Coat IOR η: texture-driven" if "eta" in driven else f"Coat IOR η {p.eta:.3f}")
+    if {"sigma_a", "depth"} & driven:
+        col.label(text="Absorption σa·d: texture-driven")
+    else:
+        col.label(text=f"Absorption σa·d: ({', '.join(f'{s * p.depth:.3g}' for s in p.sigma_a)})")
+    col.label(text=f"Bounces: {p.bounces} (subsurface reflections; 0 = the top interface only)")
+    if linked:
+        col.label(text="Texture-driven: " + ", ".join(s.name for s in linked), icon="TEXTURE")
+    elif node is not None:
+        col.label(text="No texture-driven inputs")
 
 
 def _draw_multiple_scattering(box, context, mat) -> None:
@@ -146,6 +199,13 @@ class LAMINA_PT_compare(bpy.types.Panel):
                 col.prop(settings, "ms_stride")
         if info["model"] == micrograin.ID:
             col.prop(settings, "blends")
+        if compare_run.has_principled(info["model"]):
+            col.prop(settings, "principled")
+        if compare_run.has_truth(info["model"]):
+            col.prop(settings, "truth")
+            if settings.truth:
+                col.prop(settings, "truth_paths")
+                col.prop(settings, "truth_stride")
         row = layout.row()
         row.enabled = not wrapped
         row.operator("lamina.compare", icon="IMAGE_REFERENCE")
