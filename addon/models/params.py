@@ -80,6 +80,8 @@ def _as_float(value, where: str, name: str) -> float:
 def _as_triple(value, where: str, name: str) -> tuple[float, float, float]:
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         return (float(value),) * 3
+    if isinstance(value, (str, bytes, dict)):
+        raise ParamError(f"{where}{name}: expected three numbers, got {value!r}")
     try:
         values = tuple(_as_float(v, where, name) for v in value)
     except TypeError:
@@ -102,5 +104,6 @@ def read_fields(decl: tuple[Param, ...], data: dict, where: str, warnings: list[
     known = {p.name for p in decl}
     unknown = sorted(set(data) - known)
     if unknown:
-        raise ParamError(f"{where}unknown parameter(s) {', '.join(unknown)}; expected {', '.join(sorted(known))}")
+        expected = f"expected {', '.join(sorted(known))}" if known else "it takes none"
+        raise ParamError(f"{where}unknown parameter(s) {', '.join(unknown)}; {expected}")
     return {p.name: p.clamp(data.get(p.name, p.default), where, warnings) for p in decl}

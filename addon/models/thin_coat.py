@@ -122,8 +122,9 @@ def _plain(v):
 
 
 def kappa_from_roughness(alpha: float) -> float:
-    """κ = 2 / α² (the Beckmann lobe of roughness α matches the vMF lobe of κ), kept in [1e-3, 1e6]."""
-    return min(max(2.0 / max(alpha * alpha, 1e-300), MIN_KAPPA), MAX_KAPPA)
+    """κ = 2 / α² (the Beckmann lobe of roughness α matches the vMF lobe of κ), kept in [1e-3, 1e6]; rounded to 12
+    significant digits so that round numbers stay round (α 0.1 is κ 200, not 199.99999999999997)."""
+    return float(f"{min(max(2.0 / max(alpha * alpha, 1e-300), MIN_KAPPA), MAX_KAPPA):.12g}")
 
 
 def roughness_from_kappa(kappa: float) -> float:

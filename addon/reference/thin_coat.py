@@ -44,6 +44,9 @@ from . import lobes as lobe_choice
 from . import microfacet, vmf
 from .frames import as_directions, dot, normalize, reflect, spherical
 
+# ``sample(p, wo, u)`` draws the light direction for a view (the model is built from the view), the opposite of
+# the other references; a model bulk under a porous layer is sampled accordingly (``micrograin.samples_from_view``).
+SAMPLES_FROM_VIEW = True
 DIFFUSE_NODES = 32  # Gauss-Legendre nodes of the hemispherical means over internal cosines (diffuse base)
 
 

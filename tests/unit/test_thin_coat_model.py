@@ -122,19 +122,9 @@ def test_a_thin_coat_is_a_micrograin_bulk():
         micrograin.validate({"bulk": {"type": model.ID, "bounces": 1.5}})
 
 
-@pytest.mark.xfail(not hasattr(reference, "SAMPLES_FROM_VIEW"), strict=True,
-                   reason="addon/reference/thin_coat.py does not declare SAMPLES_FROM_VIEW = True yet: a porous layer "
-                          "over a thin coat cannot sample it")
 def test_the_thin_coat_reference_says_it_samples_from_the_view():
     assert mg.samples_from_view(reference)
     assert not mg.samples_from_view(mg) and not mg.samples_from_view(scenes)
-
-
-@pytest.fixture
-def declared(monkeypatch):
-    """The thin coat's declaration that it samples from the view (the tests below check what the porous layer does
-    with it, whether or not the reference module declares it yet)."""
-    monkeypatch.setattr(reference, "SAMPLES_FROM_VIEW", True, raising=False)
 
 
 N = 200_000
@@ -156,7 +146,7 @@ def _sampled(p, wi, seed):
 
 
 @pytest.mark.parametrize("case", BULKS)
-def test_porous_layer_over_a_thin_coat_samples_what_its_pdf_says(declared, case):
+def test_porous_layer_over_a_thin_coat_samples_what_its_pdf_says(case):
     """As tests/unit/test_micrograin_sampling.py: chi-square of the layer's samples against its pdf (integrating
     to 1), and the mean weight against the albedo by deterministic quadrature of ``eval``."""
     base, wi = BULKS[case]
@@ -171,7 +161,7 @@ def test_porous_layer_over_a_thin_coat_samples_what_its_pdf_says(declared, case)
     assert np.all(np.abs(mean - albedo) <= 4 * err + 0.01 * albedo), (mean, albedo, err)
 
 
-def test_chi2_catches_the_thin_coat_pdf_taken_with_the_other_models_argument_order(declared, monkeypatch):
+def test_chi2_catches_the_thin_coat_pdf_taken_with_the_other_models_argument_order(monkeypatch):
     """Without the exchange (the density of the held direction given the drawn one) the test fails."""
     base, wi = BULKS["rough dielectric, light above"]
     p = _porous(base)
