@@ -41,7 +41,7 @@ class NumpyBackend:
 
     ``metallic_node``: whether the node group predicted (form "nodes") has Blender 4.3+'s Metallic BSDF node (a
     Beckmann reflection with the dielectric Fresnel per microfacet); Blender 4.2's takes the Fresnel at the view
-    (``fresnel_at_view``). The Blender tests set it from the running Blender."""
+    (``lobe_fresnel``). The Blender tests set it from the running Blender."""
 
     metallic_node = True
 
@@ -140,9 +140,9 @@ class NumpyBackend:
 
     def beckmann(self, color, alpha, eta=None):
         """Beckmann reflection around the shading normal; with ``eta`` the dielectric Fresnel per microfacet (Blender
-        4.2's node group: at the view, ``fresnel_at_view``)."""
+        4.2's node group: its mean over the lobe, ``lobe_fresnel``)."""
         if eta is not None and self.form == "nodes" and not self.metallic_node:
-            color, eta = fresnel_at_view(self, color, eta), None
+            color, eta = lobe_fresnel(self, color, eta, alpha), None
         self._add("beckmann", color, alpha=alpha, eta=eta)
 
     def beckmann_refraction(self, color, alpha, ior, normal):
@@ -416,13 +416,23 @@ def _osl_default(kind: str, d) -> str:
     return "{}({})".format(_osl_type(kind), ", ".join(_num(x) for x in d))
 
 
-def fresnel_at_view(b, color, eta):
+# Blender 4.2's node group: the Fresnel-weighted albedo of a Beckmann lobe over its Fresnel-free albedo is about
+# F(µ + (1 − µ) min(1, a α^q), η), the Fresnel at a cosine pulled towards normal incidence by the roughness; (a, q)
+# minimise the largest error over cos θo in [0.01, 1], α in [0.002, 1], η in [1.0001, 3]: 0.054 (0.87 for F(µ)).
+LOBE_FRESNEL_FIT = (0.62286676, 0.99199374)
+
+
+def lobe_fresnel(b, color, eta, alpha):
     """Blender 4.2's node group (no Metallic BSDF node) for a Beckmann reflection with the dielectric Fresnel per
-    microfacet: the colour times F(cos θo, η) at h = the shading normal (exact at the mirror configuration; far too
-    bright for rough lobes seen at grazing angles). [approx: fresnel-at-view-blender-4.2]"""
+    microfacet: a Fresnel-free lobe whose colour takes the lobe's mean Fresnel by ``LOBE_FRESNEL_FIT`` (its energy;
+    F(cos θo) would be exact at the mirror configuration only and 7x too bright on the plane for rough coats).
+    [approx: lobe-fresnel-blender-4.2]"""
     from .micrograin import fresnel_dielectric
 
-    return b.scale(color, fresnel_dielectric(b, b.cos_view(), eta))
+    a, q = LOBE_FRESNEL_FIT
+    mu = b.cos_view()
+    pulled = mu + (1.0 - mu) * b.minimum(a * b.exp(q * b.log(alpha)), 1.0)
+    return b.scale(color, fresnel_dielectric(b, pulled, eta))
 
 
 def schlick_at_view(b, color, f0, normal):

@@ -5,7 +5,7 @@ import math
 
 import bpy
 
-from .expr import BULK_INPUT, MAX_MIX_WEIGHT, MIN_COS, MIN_LOG, MIN_TANGENT, fresnel_at_view, schlick_at_view
+from .expr import BULK_INPUT, MAX_MIX_WEIGHT, MIN_COS, MIN_LOG, MIN_TANGENT, lobe_fresnel, schlick_at_view
 
 COLUMN = 190
 ROW = 150
@@ -316,11 +316,11 @@ class NodeBackend:
         """Beckmann reflection around the shading normal. Without ``eta``: a Glossy BSDF (Beckmann, no Fresnel). With
         ``eta`` (the dielectric Fresnel per microfacet; ``color`` must be grey): Blender 4.3+'s Metallic BSDF (Beckmann,
         physical conductor of IOR η and extinction 0, whose Fresnel is then the dielectric one) scaled by Mix and Add
-        Shaders (``_scaled``); Blender 4.2 has no such node: a Glossy BSDF whose colour takes F at the view
-        (``fresnel_at_view``)."""
+        Shaders (``_scaled``); Blender 4.2 has no such node: a Glossy BSDF whose colour takes the lobe's mean Fresnel
+        (``lobe_fresnel``)."""
         if eta is None or not hasattr(bpy.types, "ShaderNodeBsdfMetallic"):
             if eta is not None:
-                color = fresnel_at_view(self, color, eta)
+                color = lobe_fresnel(self, color, eta, alpha)
             self._closure("ShaderNodeBsdfGlossy", {"Color": color, "Roughness": self._roughness(alpha)},
                           distribution="BECKMANN")
             return

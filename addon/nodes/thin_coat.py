@@ -7,7 +7,7 @@ in backend math), and each lobe becomes one closure whose weight depends on the 
 
 * The top interface (order 0): Cycles' Beckmann reflection with α = sqrt(2 / κ1) (research notes §2) and the
   dielectric Fresnel per microfacet (OSL ``dielectric_bsdf`` without transmission; node group: the Metallic BSDF
-  with extinction 0, see ``NodeBackend.beckmann``). The vMF NDF D = M / A3 with the masking of Eq. 8 becomes
+  with extinction 0, see ``NodeBackend.beckmann``; Blender 4.2 has no such node: ``expr.lobe_fresnel``). The vMF NDF D = M / A3 with the masking of Eq. 8 becomes
   Beckmann's D with Cycles' height-correlated G2 (its rational Λ); the colour G1(o)² / G2(o, o) = G1(o)² (1 + 2Λ(o))
   makes the masking exact at the mirror configuration, where the two NDFs differ by their normalisation
   1 / (A3 (1 − e^{−2κ1})) = 1 + O(1/κ1) (matching that peak too was measured worse: both NDFs carry the same
@@ -73,10 +73,10 @@ APPROXIMATIONS = {
     "surface-as-beckmann": ("the top's vMF NDF with Eq. 8's masking rendered as Beckmann with Cycles' G2, scaled by "
                             "the masking ratio at the mirror configuration",
                             _config(kappa_top=10.0, bounces=0)),
-    "fresnel-at-view-blender-4.2": ("Blender 4.2's node group only (no Metallic BSDF node): the top's Fresnel at the "
-                                    "view F(cos θo), not per microfacet (the bench predicts 4.3+: measured in "
-                                    "tests/unit/test_thin_coat_mapping.py)",
-                        _config(kappa_top=30.0, bounces=0)),
+    "lobe-fresnel-blender-4.2": ("Blender 4.2's node group only (no Metallic BSDF node): the top's Fresnel as its "
+                                 "mean over the lobe by a fit, not per microfacet (the bench predicts 4.3+: measured "
+                                 "in tests/unit/test_thin_coat_mapping.py)",
+                                 _config(kappa_top=30.0, bounces=0)),
     "endf-as-beckmann": ("each reflection order's ENDF vMF lobe rendered as Beckmann with Cycles' G2, scaled to "
                          "its energy by a fit (α ≤ 1, κ̂ ≤ 1e6)",
                          _config(kappa_top=1e6, kappa_bottom=30.0, bounces=2)),

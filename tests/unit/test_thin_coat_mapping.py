@@ -209,18 +209,27 @@ def test_the_node_group_is_the_osl_form_but_for_the_newton_steps():
                                predicted_eval(model.ID, p, "osl")(wi, wo), rtol=1e-9, atol=1e-300)
 
 
-def test_blender_42_node_group_takes_the_fresnel_at_the_view(monkeypatch):
-    """fresnel-at-view-blender-4.2, measured on its configuration (rough top κ1 = 30, alone): on the plane a rel. RMSE
-    of 9.5 where the node group of 4.3+ (and OSL) has 0.23: F(cos θo) → 1 at grazing views, where the microfacets
-    that reflect the sun have F(i·h) ≈ 0.05."""
-    p = _params(mapping.APPROXIMATIONS["fresnel-at-view-blender-4.2"][1])
+def test_blender_42_node_group_takes_the_lobes_mean_fresnel(monkeypatch):
+    """lobe-fresnel-blender-4.2, measured on its configuration (rough top κ1 = 30, alone): rel. RMSE 0.12 / 3.25 /
+    0.16 on sphere / plane / furnace where the node group of 4.3+ (and OSL) has 0.09 / 0.23 / 0.09; the plane's
+    grazing views see the sun through microfacets whose F(i·h) the lobe's mean cannot follow (F(cos θo), the
+    Fresnel at the view, gives 9.5 there). The fit itself: within 0.054 of the lobe's mean Fresnel."""
+    p = _params(mapping.APPROXIMATIONS["lobe-fresnel-blender-4.2"][1])
     monkeypatch.setattr(expr.NumpyBackend, "metallic_node", False)
-    np.testing.assert_allclose(predicted_eval(model.ID, p, "nodes")(MIRROR, WO), reference.eval(p, MIRROR, WO) *
-                               (predicted_eval(model.ID, p, "osl")(MIRROR, WO) / reference.eval(p, MIRROR, WO)),
-                               rtol=1e-9)  # the same at the mirror configuration
-    spec = scenes.plane_scene(resolution=(32, 16))
-    err = _image_error(p, "nodes", spec)
-    assert 7.0 < err < 12.0, err
+    b = _backend(p, WO, "nodes")
+    assert [kind for kind, _, _ in b.closures] == ["beckmann"] and b.closures[0][2]["eta"] is None
+    for spec, bound in ((scenes.plane_scene(resolution=(32, 16)), 4.1), (scenes.furnace_scene(resolution=(16, 8)), 0.21)):
+        err = _image_error(p, "nodes", spec)
+        assert err < bound, (spec.name, err)
+    mu = np.geomspace(0.01, 1.0, 7)
+    wo = spherical(mu, np.zeros(7))
+    b = expr.NumpyBackend(wo, {})
+    for alpha in (0.01, 0.1, 0.4, 1.0):
+        for eta in (1.05, 1.5, 3.0):
+            fresnel = expr.lobe_fresnel(b, np.ones((7, 3)), np.full(7, eta), np.full(7, alpha))[:, 0]
+            mean = (closures_np.beckmann_reflection_albedo(wo, alpha, eta)
+                    / closures_np.beckmann_reflection_albedo(wo, alpha))[:, 0]
+            np.testing.assert_allclose(fresnel, mean, atol=0.06)
 
 
 def _image_error(p, form, spec):
