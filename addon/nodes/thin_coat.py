@@ -7,8 +7,9 @@ in backend math), and each lobe becomes one closure whose weight depends on the 
 
 * The top interface (order 0): Cycles' Beckmann reflection with α = sqrt(2 / κ1) (research notes §2) and the
   dielectric Fresnel per microfacet (OSL ``dielectric_bsdf`` without transmission; node group: the Metallic BSDF
-  with extinction 0, see ``NodeBackend.beckmann``; Blender 4.2 has no such node: ``expr.lobe_fresnel``). The vMF NDF D = M / A3 with the masking of Eq. 8 becomes
-  Beckmann's D with Cycles' height-correlated G2 (its rational Λ); the colour G1(o)² / G2(o, o) = G1(o)² (1 + 2Λ(o))
+  with extinction 0, see ``NodeBackend.beckmann``; Blender 4.2 has no such node: ``expr.lobe_fresnel``). The vMF
+  NDF D = M / A3 with the masking of Eq. 8 becomes Beckmann's D with Cycles' height-correlated G2 (its rational Λ);
+  the colour G1(o)² / G2(o, o) = G1(o)² (1 + 2Λ(o))
   makes the masking exact at the mirror configuration, where the two NDFs differ by their normalisation
   1 / (A3 (1 − e^{−2κ1})) = 1 + O(1/κ1) (matching that peak too was measured worse: both NDFs carry the same
   energy). The colour is capped at ``expr.MAX_MIX_WEIGHT`` (only reached at grazing views of smooth tops).
@@ -17,8 +18,9 @@ in backend math), and each lobe becomes one closure whose weight depends on the 
   α = sqrt(2 / κ̂_k), kept in [sqrt(2 / 10⁶), 1] (Cycles clamps α to 1). The two lobes agree near the mirror
   configuration of narrow lobes; wide lobes (a rough bottom, grazing views: κ̂ ∝ cos²θo) differ in shape: the ENDF
   has no masking and divides by |o·h| where a microfacet lobe divides by cos θo. Scaling by the masking at the
-  mirror configuration (as for the top) overshoots up to 28× at grazing views; the colour is W_k ε(θo, κ̂), ε the
-  ratio of the two lobes' energies by a fit (``energy_ratio``). [approx: endf-as-beckmann]
+  mirror configuration (as for the top) overshoots the lobe's energy up to 60× at grazing views; the colour is
+  W_k ε(θo, κ̂), ε the ratio of the two lobes' energies by a fit (``energy_ratio``, within 13%).
+  [approx: endf-as-beckmann]
 * Diffuse order k (Lambertian base): a Diffuse BSDF of colour π W_k ē, the light-side factor entry(θi) (the
   crossing of the top and the absorption on the way in, ``reference.thin_coat._entry``) replaced by its
   cosine-weighted hemispherical mean ē (``mean_entry``, 3 nodes): a closure weight cannot depend on the light; the

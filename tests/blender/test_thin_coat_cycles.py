@@ -66,6 +66,19 @@ def test_cycles_renders_the_predicted_mapping(name, form, tmp_path):
         assert err < (0.03 if sharp else 0.02), f"{name} {form} {spec.name}: {err:.4f}"
 
 
+@pytest.mark.parametrize("base", model.BASE_TYPES)
+def test_the_largest_node_groups_fit_cycles_svm_stack(base, tmp_path):
+    """Four bounces (up to ~1000 nodes for a slab): Cycles compiles the node group (an SVM stack overflow would render
+    it black) and renders the prediction; the sun-lit sphere within 2%."""
+    p = model.params_from_dict({"kappa_top": 300, "kappa_bottom": 100, "sigma_a": [0.1, 0.2, 0.3], "bounces": 4,
+                                "base": {"type": base}})
+    mat = material.new_material(model.ID, p, "nodes")
+    spec = S.sphere_scene(resolution=24)
+    img = _render(mat, spec, 16, tmp_path)
+    predicted = predicted_image(model.ID, p, "nodes", spec)
+    assert img.max() > 0.0 and _relative(img, predicted, spec) < 0.02
+
+
 # ------------------------------------------------------------------------------------------ the closures alone
 
 SOURCE = ('#include "stdcycles.h"\nshader t(vector LaminaTangent = vector(0), output closure color BSDF = 0) '

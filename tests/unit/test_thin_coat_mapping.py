@@ -218,7 +218,8 @@ def test_blender_42_node_group_takes_the_lobes_mean_fresnel(monkeypatch):
     monkeypatch.setattr(expr.NumpyBackend, "metallic_node", False)
     b = _backend(p, WO, "nodes")
     assert [kind for kind, _, _ in b.closures] == ["beckmann"] and b.closures[0][2]["eta"] is None
-    for spec, bound in ((scenes.plane_scene(resolution=(32, 16)), 4.1), (scenes.furnace_scene(resolution=(16, 8)), 0.21)):
+    for spec, bound in ((scenes.plane_scene(resolution=(32, 16)), 4.1),
+                        (scenes.furnace_scene(resolution=(16, 8)), 0.21)):
         err = _image_error(p, "nodes", spec)
         assert err < bound, (spec.name, err)
     mu = np.geomspace(0.01, 1.0, 7)
