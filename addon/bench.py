@@ -669,7 +669,7 @@ def overview_picture(path: str, samples: int, resolution: int) -> None:
 
 def run(out_dir: str, samples: int = 64, resolution: int = 64, ms: MsSizes | None = MS_DEFAULT) -> None:
     """Both documents; ``ms`` sizes the multiple-scattering sections (None: leave them out)."""
-    from . import bench_micrograin
+    from . import bench_micrograin, bench_thin_coat
     from .operators.compare_run import write_text_atomic
 
     os.makedirs(out_dir, exist_ok=True)
@@ -678,11 +678,13 @@ def run(out_dir: str, samples: int = 64, resolution: int = 64, ms: MsSizes | Non
     if ms is not None:
         accuracy += ms_accuracy_markdown(ms, samples, resolution)
     accuracy += bench_micrograin.accuracy_markdown(resolution)
+    accuracy += bench_thin_coat.accuracy_markdown(resolution)
     write_text_atomic(os.path.join(out_dir, "accuracy.md"), accuracy)
     print(f"lamina: wrote {os.path.join(out_dir, 'accuracy.md')}", flush=True)
     speed = benchmarks_markdown(samples * 2, resolution * 4)
     if ms is not None:
         speed += ms_speed_markdown(ms, samples * 2, resolution * 4)
     speed += bench_micrograin.speed_markdown(samples * 2, resolution * 4)
+    speed += bench_thin_coat.speed_markdown(samples * 2, resolution * 4)
     write_text_atomic(os.path.join(out_dir, "benchmarks.md"), speed)
     print(f"lamina: wrote {os.path.join(out_dir, 'benchmarks.md')}", flush=True)
