@@ -37,8 +37,8 @@ in backend math), and each lobe becomes one closure whose weight depends on the 
   tests/blender/test_cycles_facts.py). [approx: transmission-as-refraction]
 
 The vMF helpers run in float32 in both forms (``complement``, ``kappa_from_complement``): mean cosines are carried
-by their complements u = 1 − A3 (``_Keep``: products of A3 combine the u's without forming 1 − u, which float32
-cannot resolve below 6e-8; a mirror-smooth coat would get u = 0). The inverse takes Banerjee's approximation refined
+by their complements u = 1 − A3, which the reference's convolution combines without forming A3 (float32 cannot
+resolve 1 − u below 6e-8). The inverse takes Banerjee's approximation refined
 by two Newton steps in OSL (relative error 1.5e-4); the node group skips the Newton steps (4.9%, at κ ≈ 5;
 ``kappa_error``). [approx: kappa-without-newton]
 
@@ -279,92 +279,6 @@ def kappa_from_complement(b, u, newton: int):
     return (1.0 / u) * sharp + kappa * (1.0 - sharp)
 
 
-class _Complement:
-    """u = 1 − A3 as ``BackendOps.complement`` returns it: ``1 − u`` gives a ``_Keep`` (A3 held as u)."""
-
-    __array_ufunc__ = None  # numpy defers to the reflected operators
-
-    def __init__(self, u):
-        self.u = u
-
-    def value(self):
-        return self.u
-
-    def __rsub__(self, o):
-        if isinstance(o, (int, float)) and o == 1.0:
-            return _Keep(self.u)
-        return o - self.u
-
-    def __sub__(self, o):
-        return self.u - _plain(o)
-
-    def __add__(self, o):
-        return self.u + _plain(o)
-
-    __radd__ = __add__
-
-    def __mul__(self, o):
-        return self.u * _plain(o)
-
-    __rmul__ = __mul__
-
-    def __truediv__(self, o):
-        return self.u / _plain(o)
-
-    def __rtruediv__(self, o):
-        return o / self.u
-
-
-class _Keep:
-    """A3 = 1 − u held as u, so that float32 keeps u's digits: products of ``_Keep``'s combine exactly
-    (1 − (1 − u1)(1 − u2) = u1 + u2 − u1 u2, the vMF convolution of Eq. 18), ``1 − keep`` gives u back; any other
-    use sees 1 − u."""
-
-    __array_ufunc__ = None
-
-    def __init__(self, u):
-        self.u = u
-        self._value = None
-
-    def value(self):
-        if self._value is None:
-            self._value = 1.0 - self.u
-        return self._value
-
-    def __mul__(self, o):
-        if isinstance(o, _Keep):
-            return _Keep(self.u + o.u - self.u * o.u)
-        return self.value() * _plain(o)
-
-    def __rmul__(self, o):
-        return o * self.value()
-
-    def __rsub__(self, o):
-        if isinstance(o, (int, float)) and o == 1.0:
-            return self.u
-        return o - self.value()
-
-    def __sub__(self, o):
-        return self.value() - _plain(o)
-
-    def __add__(self, o):
-        if isinstance(o, (int, float)):
-            return (1.0 + o) - self.u
-        return self.value() + _plain(o)
-
-    __radd__ = __add__
-
-    def __truediv__(self, o):
-        return self.value() / _plain(o)
-
-    def __rtruediv__(self, o):
-        return o / self.value()
-
-
-def _plain(x):
-    return x.value() if isinstance(x, (_Keep, _Complement)) else x
-
-
 # ------------------------------------------------------------------------------------------ Fresnel and means
 
 def fresnel_conductor(b, c, eta, k):
@@ -409,53 +323,29 @@ def diffuse_means(b, eta, sigma_d):
 
 class BackendOps:
     """The operations ``reference.thin_coat.lobes`` needs (see ``reference.thin_coat.Float64Ops``) on an ``expr``
-    backend: its math, float32-safe vMF helpers, Fresnel and the diffuse means by fits. ``complement`` of the same
-    κ object is built once."""
+    backend: its math, float32-safe vMF helpers, Fresnel and the diffuse means by fits."""
 
     def __init__(self, b):
         self.b = b
         self.newton = NEWTON_STEPS[getattr(b, "form", "osl")]
-        self._complements: dict[int, tuple] = {}
-
-    def exp(self, x):
-        return self.b.exp(_plain(x))
-
-    def log(self, x):
-        return self.b.log(_plain(x))
-
-    def sqrt(self, x):
-        return self.b.sqrt(_plain(x))
-
-    def cos(self, x):
-        return self.b.cos(_plain(x))
-
-    def acos(self, x):
-        return self.b.acos(_plain(x))
-
-    def maximum(self, a, c):
-        return self.b.maximum(_plain(a), _plain(c))
-
-    def minimum(self, a, c):
-        return self.b.minimum(_plain(a), _plain(c))
+        self.exp, self.log, self.sqrt, self.cos, self.acos = b.exp, b.log, b.sqrt, b.cos, b.acos
+        self.maximum, self.minimum = b.maximum, b.minimum
 
     def scale(self, color, s):
-        return self.b.scale(self.color(_plain(color), 0), _plain(s))
+        return self.b.scale(self.color(color, 0), s)
 
     def complement(self, kappa):
-        key = id(kappa)
-        if key not in self._complements:
-            self._complements[key] = (kappa, _Complement(complement(self.b, _plain(kappa))))
-        return self._complements[key][1]
+        return complement(self.b, kappa)
 
     def kappa(self, u):
-        return kappa_from_complement(self.b, _plain(u), self.newton)
+        return kappa_from_complement(self.b, u, self.newton)
 
     def fresnel_dielectric(self, c, eta):
         """Handles η < 1: total internal reflection gives 1 (the square root clamps at 0)."""
-        return fresnel_dielectric(self.b, _plain(c), _plain(eta))
+        return fresnel_dielectric(self.b, c, eta)
 
     def fresnel_conductor(self, c, eta, k):
-        return fresnel_conductor(self.b, _plain(c), eta, k)
+        return fresnel_conductor(self.b, c, eta, k)
 
     def diffuse_means(self, eta, sigma_d):
         return diffuse_means(self.b, eta, sigma_d)

@@ -118,12 +118,13 @@ def _facet_refraction_jacobian(c_o, ct, eta):
 
 
 def _convolved(ops, kappas):
-    """κ of the convolution of vMF lobes (Eq. 18 repeated): 1 − A3 multiplies as u = 1 − Π(1 − u_j)."""
-    keep = None
+    """κ of the convolution of vMF lobes (Eq. 18 repeated): the mean cosines multiply, so the complements combine
+    as u = u1 + u2 − u1 u2 (``vmf.convolve``), which keeps the digits of sharp lobes where A3 rounds to 1."""
+    u = None
     for kappa in kappas:
-        u = ops.complement(kappa)
-        keep = 1.0 - u if keep is None else keep * (1.0 - u)
-    return ops.kappa(1.0 - keep)
+        uj = ops.complement(kappa)
+        u = uj if u is None else u + uj - u * uj
+    return ops.kappa(u)
 
 
 def lobes(ops, p: Params, cos_o, n: int, inputs: dict | None = None) -> list[Lobe]:

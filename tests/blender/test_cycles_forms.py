@@ -146,7 +146,8 @@ def test_extreme_parameters_render_finite_non_negative_pixels(config, form, tmp_
         assert np.all(np.isfinite(img)) and np.all(img >= 0), spec.name
 
 
-@pytest.mark.parametrize("model_id, name", [("spongecake", "leaf"), ("micrograin", "mud_on_plastic")])
+@pytest.mark.parametrize("model_id, name", [("spongecake", "leaf"), ("micrograin", "mud_on_plastic"),
+                                           ("thin_coat", "varnished_metal")])
 @pytest.mark.parametrize("form", ["nodes", "osl"])
 def test_saved_blend_renders_the_same_without_lamina(form, model_id, name, tmp_path):
     """Rendered here (Lamina loaded) and in a fresh process where Lamina cannot even be imported (the porous
