@@ -76,15 +76,10 @@ def masking_rows() -> list[dict]:
 
 def model_exits(p, wo, order: int, n: int = 20000, seed: int = 0):
     """Exit directions and weights f cos / pdf of the model's order-``order`` reflection lobe, drawn from the lobe
-    itself: what ``thin_coat_truth.lobe_moments`` compares with the ground truth's exits (both cut by the
-    horizon alike)."""
-    lobe = next(lb for lb in reference._lobes_at(p, wo) if lb.order == order and lb.kind != "transmission")
-    ws = np.repeat(wo, n, axis=0)
-    u = np.random.default_rng(seed).random((2, n))
-    x = reference._lobe_sample(lobe, ws, u[0], u[1])
-    value = reference._lobe_value(p, lobe, x, ws) * np.abs(x[:, 2:])
-    density = reference._lobe_pdf(lobe, x, ws)[:, None]
-    w = np.divide(value, density, out=np.zeros_like(value), where=density > 0)
+    itself: what ``warping.sample_moments`` compares with the ground truth's exits (both cut by the horizon
+    alike)."""
+    lobe = next(lb for lb in reference.lobes_at(p, wo) if lb.order == order and lb.kind != "transmission")
+    x, w = reference.lobe_samples(p, lobe, wo, n, np.random.default_rng(seed))
     keep = w.sum(axis=1) > 0
     return x[keep], w[keep]
 
@@ -110,8 +105,8 @@ def truth_rows(paths: int = GT_PATHS, seed: int = 11, grid=None) -> list[dict]:
                              "theta": theta, "order": k,
                              "energy": float(energy[k]), "energy_gt": float(gt["reflection"][k].mean()),
                              "energy_se": float(gt["stderr"]["reflection"][k].mean()),
-                             "kappa": truth.lobe_moments(*model_exits(p, wo, k))[1] if enough else float("nan"),
-                             "kappa_gt": truth.lobe_moments(dirs, weights)[1] if enough else float("nan"),
+                             "kappa": warping.sample_moments(*model_exits(p, wo, k))[1] if enough else float("nan"),
+                             "kappa_gt": warping.sample_moments(dirs, weights)[1] if enough else float("nan"),
                              "peak": float(peak[k]), "peak_gt": float(f_gt[k, 0].mean()),
                              "peak_se": float(f_se[k, 0].mean())})
     return rows
@@ -318,7 +313,7 @@ def speed_markdown(samples: int, resolution: int) -> str:
         lines.append(f"| {k} | {1e6 * r['ours']:.2f} | {1e6 * r['gt']:.2f} | {r['gt'] / r['ours']:.2f} |")
     rows = render_times(samples, resolution)
     one = {form: next(r[form] for r in rows if r["preset"] == 1) for form in ("nodes", "osl")}
-    lines += ["", f"### Cycles render time against the bounce count", "",
+    lines += ["", "### Cycles render time against the bounce count", "",
               f"Sphere scene, {resolution}×{resolution} px, {samples} samples, fastest of 3, varnished_metal with "
               "0-4 subsurface bounces; ratio to 1 bounce (the goal: 4 bounces ≤ 1.2× of 1).", "",
               "| bounces | node group s | OSL s | node group : 1 bounce | OSL : 1 bounce |", "|---|---|---|---|---|"]

@@ -22,7 +22,7 @@ in backend math), and each lobe becomes one closure whose weight depends on the 
   W_k ε(θo, κ̂), ε the ratio of the two lobes' energies by a fit (``energy_ratio``, within 13%).
   [approx: endf-as-beckmann]
 * Diffuse order k (Lambertian base): a Diffuse BSDF of colour π W_k ē, the light-side factor entry(θi) (the
-  crossing of the top and the absorption on the way in, ``reference.thin_coat._entry``) replaced by its
+  crossing of the top and the absorption on the way in, ``reference.thin_coat.entry``) replaced by its
   cosine-weighted hemispherical mean ē (``mean_entry``, 3 nodes): a closure weight cannot depend on the light; the
   energy under uniform light is kept. The view's entry(θo) (exact at the mirror configuration only) measured worse:
   glazed_ceramic 8.0% against 0.7% in the furnace, 11% against 3.5% on the plane, 7.1% against 6.9% on the
@@ -186,13 +186,13 @@ ENTRY_NODES = 3
 
 
 def mean_entry(ops, eta, kappa_top, sigma_d):
-    """The cosine-weighted hemispherical mean of the diffuse orders' light-side factor ``reference.thin_coat._entry``
+    """The cosine-weighted hemispherical mean of the diffuse orders' light-side factor ``reference.thin_coat.entry``
     (the top's crossing and the absorption on the way in), 2 ∫ entry(µ) µ dµ = ∫ entry(√v) dv, by ``ENTRY_NODES``
     Gauss-Legendre nodes in v: exact under uniform light (the furnace), not per light direction."""
     x, w = np.polynomial.legendre.leggauss(ENTRY_NODES)
     total = None
     for xj, wj in zip(x, w):
-        term = ops.scale(reference._entry(ops, float(np.sqrt(0.5 * (xj + 1.0))), eta, kappa_top, sigma_d), 0.5 * wj)
+        term = ops.scale(reference.entry(ops, float(np.sqrt(0.5 * (xj + 1.0))), eta, kappa_top, sigma_d), 0.5 * wj)
         total = term if total is None else total + term
     return total
 

@@ -18,7 +18,7 @@ directions; with µm = n and no bump the mean path is the mirror path, refracted
   convolved (Eq. 18: mean cosines multiply, ``vmf.convolve``), then κ̂ = 4 cos θo κ_i (Eq. 19).
   W_k is the product of the path's interaction energies at the mean directions (``_interaction``), and the
   absorption e^{−σa d / cos θt} per traversal (Eq. 27).
-* over a diffuse base, order k is Lambertian in i: the light enters at its own angle (``_entry``), is reflected
+* over a diffuse base, order k is Lambertian in i: the light enters at its own angle (``entry``), is reflected
   by the base k times with k − 1 internal reflections of cosine-distributed light in between (hemispherical
   means), and leaves towards o.
 * ``slab`` (no base): transmission order j = 0..bounces (j reflections at the bottom) is the vMF lobe of exit
@@ -86,7 +86,7 @@ def refracted_cosine(ops, c, eta):
     return ops.sqrt(ops.maximum(1.0 - (1.0 - c * c) / (eta * eta), 0.0))
 
 
-def _entry(ops, c, eta, kappa_top, sigma_d):
+def entry(ops, c, eta, kappa_top, sigma_d):
     """What crossing the top inwards at cos θ = c and reaching the bottom leaves of the light: the energy
     (1 − F(c)) G1(θt) and the absorption e^{−σa d / cos θt} (Eq. 27), a colour."""
     ct = refracted_cosine(ops, c, eta)
@@ -146,7 +146,7 @@ def lobes(ops, p: Params, cos_o, n: int, inputs: dict | None = None) -> list[Lob
     if p.base.type == "diffuse":
         return out + _diffuse_lobes(ops, p, eta, inputs.get("albedo", ops.color(p.base.albedo, n)),
                                     ops.scale(down, leave), sigma_d)
-    enter = _entry(ops, c_o, eta, k1, sigma_d)
+    enter = entry(ops, c_o, eta, k1, sigma_d)
     bottom = ops.scale(_bottom_fresnel(ops, p.base, ct, eta, n) * down, smith_g1(ops, ct, k2))
     top_inside = ops.scale(down, f_top * smith_g1(ops, ct, k1))  # reflected under the top and back down
     j_exit = _exit_jacobian(c_o, ct, eta)
@@ -197,7 +197,7 @@ def diffuse_means(eta, sigma_d):
 
 
 def _diffuse_lobes(ops, p, eta, albedo, view, sigma_d):
-    """Orders over a Lambertian base, view part only (``eval`` multiplies by ``_entry`` at the light's angle):
+    """Orders over a Lambertian base, view part only (``eval`` multiplies by ``entry`` at the light's angle):
     ρ / (π η²) · view · (ρ r̄_i τ̄²)^{k−1}, view = (1 − F(θo)) G1(θo) e^{−σa d / cos θt}; 1 / η² is the radiance
     compression of light leaving the coat."""
     r_i, through = ops.diffuse_means(eta, sigma_d)
@@ -246,12 +246,6 @@ class Sample(NamedTuple):
     pdf: np.ndarray
 
 
-def _lobe_density(cos_or_dirs, mu, kappa):
-    """vMF density M(x; mu, κ) with 1 − x·mu from |x − mu|² / 2 (full precision at the peak of sharp lobes)."""
-    d = cos_or_dirs - mu
-    return vmf.density(1.0 - 0.5 * dot(d, d), kappa)
-
-
 def _seen_from_above(p: Params, wi, wo):
     """(p, wi, wo) with the viewer above: a slab seen from below is the slab upside down (κ1 and κ2 exchanged)."""
     below = wo[:, 2] < 0.0
@@ -262,7 +256,8 @@ def _seen_from_above(p: Params, wi, wo):
     return [(p, wi, wo, ~below), (upside_down, wi * flip, wo * flip, below)]
 
 
-def _lobes_at(p: Params, wo):
+def lobes_at(p: Params, wo):
+    """The lobes (float64) for views ``wo`` above the surface."""
     return lobes(F64, p, np.maximum(wo[:, 2], 1e-12), len(wo))
 
 
@@ -270,26 +265,26 @@ def _surface(p: Params, wi, wo):
     """Order 0: F(i·h) G1(o) G1(i) D(h) / (4 cos θo cos θi), D = M / A3 (Eqs. 1, 2, 6-9)."""
     h = normalize(wi + wo)
     ci, co = np.maximum(wi[:, 2], 1e-100), np.maximum(wo[:, 2], 1e-100)  # G1 -> 0 makes f -> 0 there
-    d = _lobe_density(h, np.array([0.0, 0.0, 1.0]), p.kappa_top) / vmf.a3(p.kappa_top)
+    d = vmf.density_around(h, np.array([0.0, 0.0, 1.0]), p.kappa_top) / vmf.a3(p.kappa_top)
     g = smith_g1(F64, ci, p.kappa_top) * smith_g1(F64, co, p.kappa_top)
     return microfacet.fresnel_dielectric(dot(wi, h), p.eta) * g * d / (4.0 * ci * co)
 
 
-def _lobe_value(p: Params, lobe: Lobe, wi, wo):
+def lobe_value(p: Params, lobe: Lobe, wi, wo):
     """One lobe's f(wi, wo) (N, 3) for views above (module docstring)."""
     up = wi[:, 2] > 0.0
     ci = np.abs(wi[:, 2])
     if lobe.kind == "transmission":
-        dens = _lobe_density(wi, -wo, lobe.kappa) / np.maximum(ci, 1e-300)
+        dens = vmf.density_around(wi, -wo, lobe.kappa) / np.maximum(ci, 1e-300)
         return np.where(~up[:, None] & (ci[:, None] > 0), lobe.weight * dens[:, None], 0.0)
     if lobe.kind == "surface":
         value = _surface(p, wi, wo)[:, None] * lobe.weight
     elif lobe.kind == "diffuse":
         sigma_d = np.asarray(p.sigma_a, dtype=float) * p.depth
-        value = lobe.weight * _entry(F64, np.minimum(ci, 1.0), p.eta, p.kappa_top, sigma_d[None, :])
+        value = lobe.weight * entry(F64, np.minimum(ci, 1.0), p.eta, p.kappa_top, sigma_d[None, :])
     else:
         h = normalize(wi + wo)
-        dens = _lobe_density(h, np.array([0.0, 0.0, 1.0]), lobe.kappa) / (4.0 * np.maximum(dot(wo, h), 1e-300)
+        dens = vmf.density_around(h, np.array([0.0, 0.0, 1.0]), lobe.kappa) / (4.0 * np.maximum(dot(wo, h), 1e-300)
                                                                           * np.maximum(ci, 1e-300))
         value = lobe.weight * dens[:, None]
     return np.where(up[:, None], value, 0.0)
@@ -305,8 +300,8 @@ def eval_orders(p: Params, wi, wo):
         if not rows.any():
             continue
         a, b = a[rows], b[rows]
-        for lobe in _lobes_at(q, b):
-            value = _lobe_value(q, lobe, a, b)
+        for lobe in lobes_at(q, b):
+            value = lobe_value(q, lobe, a, b)
             out[lobe.order, rows] += np.where(b[:, 2:] > 0.0, value, 0.0)
     return out
 
@@ -320,7 +315,7 @@ def eval(p: Params, wi, wo):
 
 def _lobe_probabilities(p: Params, wo, found):
     """(N, L) probabilities of picking each lobe: its expected albedo (the surface F(θo), a reflection or
-    transmission lobe its weight, a diffuse lobe its weight times π τ̄), channel-averaged."""
+    transmission lobe its weight, a diffuse lobe its weight times π, an upper bound of ∫ entry cos), channel-averaged."""
     f = microfacet.fresnel_dielectric(wo[:, 2], p.eta)
     energy = [np.maximum(f, 1e-3) if lobe.kind == "surface"
               else np.mean(lobe.weight, axis=1) * (np.pi if lobe.kind == "diffuse" else 1.0) for lobe in found]
@@ -334,7 +329,7 @@ def _reflection_pdf(kappa, wi, wo):
     horizon for views above, where reflection lobes are zero)."""
     h = normalize(wi + wo)
     z = np.array([0.0, 0.0, 1.0])
-    dens = _lobe_density(h, z, kappa) + _lobe_density(-h, z, kappa)
+    dens = vmf.density_around(h, z, kappa) + vmf.density_around(-h, z, kappa)
     return np.divide(dens, 4.0 * np.abs(dot(wo, h)), out=np.zeros(len(wo)), where=np.abs(dot(wo, h)) > 0)
 
 
@@ -344,7 +339,7 @@ def _lobe_pdf(lobe: Lobe, wi, wo):
     if lobe.kind == "diffuse":
         return np.maximum(wi[:, 2], 0.0) / np.pi
     if lobe.kind == "transmission":
-        return _lobe_density(wi, -wo, lobe.kappa)
+        return vmf.density_around(wi, -wo, lobe.kappa)
     return _reflection_pdf(lobe.kappa, wi, wo)
 
 
@@ -358,7 +353,7 @@ def _lobe_sample(lobe: Lobe, wo, u1, u2):
 
 
 def _pdf_above(p: Params, wi, wo):
-    found = _lobes_at(p, wo)
+    found = lobes_at(p, wo)
     prob = _lobe_probabilities(p, wo, found)
     return sum(prob[:, column] * _lobe_pdf(lobe, wi, wo) for column, lobe in enumerate(found))
 
@@ -374,7 +369,7 @@ def pdf(p: Params, wi, wo):
 
 
 def _sample_above(p: Params, wo, u):
-    found = _lobes_at(p, wo)
+    found = lobes_at(p, wo)
     lobe, _, _ = lobe_choice.choose(_lobe_probabilities(p, wo, found), u[:, 0])
     wi = np.empty_like(wo)
     for column, lb in enumerate(found):
@@ -393,7 +388,7 @@ def sample(p: Params, wo, u) -> Sample:
     reflection lobes reflect wo about a half vector drawn from their (E)NDF (Sec. 5.4: one draw per bounce
     order, not one per interface), a diffuse lobe draws a cosine, a transmission lobe its vMF around −wo."""
     wo, u = as_directions(wo), as_directions(u)
-    wi = np.empty_like(wo)
+    wi = -wo  # views below an opaque coat: nothing to draw (weight and pdf 0)
     for q, _, b, rows in _seen_from_above(p, wo, wo):
         if rows.any():
             drawn = _sample_above(q, b[rows], u[rows])
@@ -404,22 +399,30 @@ def sample(p: Params, wo, u) -> Sample:
     return Sample(wi, weight, density)
 
 
+def lobe_samples(p: Params, lobe: Lobe, wo, n: int, rng):
+    """n directions drawn from one lobe's own sampler for the single view ``wo`` (1, 3) above, and their weights
+    f_lobe |cos wi| / pdf_lobe (n, 3): each lobe integrated alone, without variance from lobes of other widths."""
+    ws = np.repeat(wo, n, axis=0)
+    u = rng.random((2, n))
+    x = _lobe_sample(lobe, ws, u[0], u[1])
+    density = _lobe_pdf(lobe, x, ws)[:, None]
+    value = lobe_value(p, lobe, x, ws) * np.abs(x[:, 2:])
+    return x, np.divide(value, density, out=np.zeros_like(value), where=density > 0)
+
+
 def directional_albedo(p: Params, wo, n: int = 16384, seed: int = 0, orders: bool = False):
-    """∫ f(wi, wo) |cos wi| dwi (N, 3) (per order (bounces + 1, N, 3) with ``orders``): seeded Monte Carlo, each
-    lobe integrated with n samples of its own sampler (no variance from lobes of very different widths)."""
+    """∫ f(wi, wo) |cos wi| dwi (N, 3) (per order (bounces + 1, N, 3) with ``orders``): seeded Monte Carlo, n samples
+    of each lobe's own sampler (``lobe_samples``). Zero for views below an opaque coat."""
     wo = as_directions(wo)
     rng = np.random.default_rng(seed)
     albedo = np.zeros((p.bounces + 1, len(wo), 3))
     for row in range(len(wo)):
-        (q, _, w, _), = [v for v in _seen_from_above(p, wo[row:row + 1], wo[row:row + 1]) if v[3].all()]
-        ws = np.repeat(w, n, axis=0)
-        for lobe in _lobes_at(q, w):
-            u = rng.random((2, n))
-            x = _lobe_sample(lobe, ws, u[0], u[1])
-            density = _lobe_pdf(lobe, x, ws)
-            value = _lobe_value(q, lobe, x, ws) * np.abs(x[:, 2:])
-            albedo[lobe.order, row] += np.sum(np.divide(value, density[:, None], out=np.zeros_like(value),
-                                                        where=density[:, None] > 0), axis=0) / n
+        seen = [v for v in _seen_from_above(p, wo[row:row + 1], wo[row:row + 1]) if v[3].all()]
+        if not seen:
+            continue
+        q, _, w, _ = seen[0]
+        for lobe in lobes_at(q, w):
+            albedo[lobe.order, row] += lobe_samples(q, lobe, w, n, rng)[1].mean(axis=0)
     return albedo if orders else albedo.sum(axis=0)
 
 

@@ -50,7 +50,7 @@ from .frames import as_directions, dot, normalize
 from .microfacet import fresnel_conductor, fresnel_dielectric
 
 __all__ = ["projected_area_exact", "smith_g1", "sample_visible_normals", "surface_reflection", "ground_truth",
-           "ground_truth_albedo", "lobe_moments"]
+           "ground_truth_albedo"]
 
 N_BATCHES = 8
 G1_CHUNK = 1024  # rows per vectorised quadrature block (up to ~300 nodes each)
@@ -391,7 +391,7 @@ def ground_truth_albedo(p, wo, n_paths=20000, seed=0, n_batches=N_BATCHES, max_e
     Returns a dict: "reflection" (bounces + 1, 3) (order 0: the top surface, by sampling), "transmission"
     (bounces + 1, 3) (zeros unless slab), "stderr": {"reflection", "transmission"} of the same shapes, "exits":
     {"reflection", "transmission"}, per order a (directions (K, 3), weights (K, 3)) pair of exit samples (the
-    first max_exit_samples of them, in path order; for ``lobe_moments``), and "n_paths" (the paths traced)."""
+    first max_exit_samples of them, in path order; for ``warping.sample_moments``), and "n_paths" (the paths traced)."""
     p, wo = _params(p), _viewer(wo)
     names = ("reflection", "transmission")
     energies = {name: [] for name in names}
@@ -416,16 +416,3 @@ def ground_truth_albedo(p, wo, n_paths=20000, seed=0, n_batches=N_BATCHES, max_e
         out["exits"][name] = [(np.concatenate([d for d, _ in s] + [np.zeros((0, 3))]),
                                np.concatenate([w for _, w in s] + [np.zeros((0, 3))])) for s in samples[name]]
     return out
-
-
-def lobe_moments(dirs, weights):
-    """Weighted mean direction and moment-matched vMF kappa of exit samples (``warping.sample_moments`` with
-    weights; RGB weights are averaged over channels): 1 - A3 = sum w |d - mu|^2 / 2 / sum w."""
-    dirs = as_directions(dirs)
-    w = np.asarray(weights, dtype=float)
-    w = w.mean(axis=1) if w.ndim == 2 else w
-    total = w.sum()
-    mean = (dirs * w[:, None]).sum(axis=0) / total
-    mu = mean / np.linalg.norm(mean)
-    diff = dirs - mu
-    return mu, float(vmf.kappa_from_complement(0.5 * np.sum(w * dot(diff, diff)) / total))

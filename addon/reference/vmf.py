@@ -38,6 +38,13 @@ def density(cos_theta, kappa):
     return _kappa_over_one_minus_exp(kappa) / (2.0 * np.pi) * np.exp(kappa * (cos_theta - 1.0))
 
 
+def density_around(x, mu, kappa):
+    """M(x; mu, kappa) for unit rows x and mean directions mu, with 1 - x . mu from |x - mu|^2 / 2 (no cancellation
+    at the peak of sharp lobes, where 1 - cos theta is far below float64's epsilon)."""
+    d = np.asarray(x, dtype=float) - np.asarray(mu, dtype=float)
+    return density(1.0 - 0.5 * np.einsum("...i,...i->...", d, d), kappa)
+
+
 def _a3_series(kappa):
     """Langevin series A3 = k/3 - k^3/45 + 2 k^5/945 - k^7/4725 (next term < 3e-15 relative below 0.05)."""
     k2 = kappa * kappa

@@ -181,12 +181,15 @@ def exact_samples_refract(mu_o, kappa_o, mu_m, kappa_m, eta, n, seed):
     return t[keep], keep.mean()
 
 
-def sample_moments(dirs):
-    """Mean direction and moment-matched vMF kappa of sample rows: 1 - A3 estimated as mean |d - mu|^2 / 2."""
-    mean = dirs.mean(axis=0)
+def sample_moments(dirs, weights=None):
+    """Mean direction and moment-matched vMF kappa of sample rows (optionally weighted; RGB weights are averaged
+    over channels): 1 - A3 estimated as the weighted mean of |d - mu|^2 / 2."""
+    w = np.ones(len(dirs)) if weights is None else np.asarray(weights, dtype=float)
+    w = w.mean(axis=1) if w.ndim == 2 else w
+    mean = np.sum(dirs * w[:, None], axis=0)
     mu = mean / np.linalg.norm(mean)
     d = dirs - mu
-    return mu, vmf.kappa_from_complement(0.5 * np.mean(dot(d, d)))
+    return mu, vmf.kappa_from_complement(0.5 * np.sum(w * dot(d, d)) / np.sum(w))
 
 
 def lobe_rule(mu, kappa, extent=40.0, n_s=64, n_phi=48):
@@ -208,12 +211,6 @@ def lobe_rule(mu, kappa, extent=40.0, n_s=64, n_phi=48):
     return dirs, np.repeat(ws, n_phi) * (2.0 * np.pi / n_phi)
 
 
-def _lobe_density(x, mu, kappa):
-    """M(x; mu, kappa) with 1 - cos from |x - mu|^2 / 2 (no cancellation near the peak)."""
-    d = x - mu
-    return vmf.density(1.0 - 0.5 * dot(d, d), kappa)
-
-
 def _integrate(points, integrand, nodes, weights, chunk=256):
     out = np.empty(len(points))
     for i in range(0, len(points), chunk):
@@ -230,14 +227,14 @@ def exact_density_reflect(r, mu_o, kappa_o, mu_m, kappa_m, n_s=64, n_phi=48):
     if kappa_o >= kappa_m * float(reflection_jacobian(mu_o, mu_m)[0]):
         def f(x, o):
             h = normalize(o + x)
-            return _lobe_density(o, mu_o, kappa_o) * _lobe_density(h, mu_m, kappa_m) * 0.25 / np.maximum(
+            return vmf.density_around(o, mu_o, kappa_o) * vmf.density_around(h, mu_m, kappa_m) * 0.25 / np.maximum(
                 dot(o, h), 1e-300)
         nodes, weights = lobe_rule(mu_o, kappa_o, n_s=n_s, n_phi=n_phi)
     else:
         def f(x, m):
             c = dot(x, m)
             o = 2.0 * c[..., None] * m - x
-            return np.where(c > 0.0, _lobe_density(m, mu_m, kappa_m) * _lobe_density(o, mu_o, kappa_o), 0.0)
+            return np.where(c > 0.0, vmf.density_around(m, mu_m, kappa_m) * vmf.density_around(o, mu_o, kappa_o), 0.0)
         nodes, weights = lobe_rule(mu_m, kappa_m, n_s=n_s, n_phi=n_phi)
     return _integrate(r, f, nodes, weights)
 
@@ -256,7 +253,7 @@ def exact_density_refract(t, mu_o, kappa_o, mu_m, kappa_m, eta, n_s=64, n_phi=48
             m = normalize(np.where((dot(o, v) < 0.0)[..., None], -v, v))
             cm, tm = dot(o, m), dot(x, m)
             jac = eta * eta * np.abs(tm) / np.maximum((cm + eta * tm) ** 2, 1e-300)
-            return np.where(tm < 0.0, _lobe_density(o, mu_o, kappa_o) * _lobe_density(m, mu_m, kappa_m) * jac, 0.0)
+            return np.where(tm < 0.0, vmf.density_around(o, mu_o, kappa_o) * vmf.density_around(m, mu_m, kappa_m) * jac, 0.0)
         nodes, weights = lobe_rule(mu_o, kappa_o, n_s=n_s, n_phi=n_phi)
     else:
         def f(x, m):
@@ -265,7 +262,7 @@ def exact_density_refract(t, mu_o, kappa_o, mu_m, kappa_m, eta, n_s=64, n_phi=48
             o, ok = refract(x_b.reshape(-1, 3), m_b.reshape(-1, 3), 1.0 / eta)
             o, ok = o.reshape(m_b.shape), ok.reshape(tm.shape)
             cm = np.maximum(dot(o, m), 1e-300)
-            val = _lobe_density(m, mu_m, kappa_m) * _lobe_density(o, mu_o, kappa_o) * eta * eta * np.abs(tm) / cm
+            val = vmf.density_around(m, mu_m, kappa_m) * vmf.density_around(o, mu_o, kappa_o) * eta * eta * np.abs(tm) / cm
             return np.where(ok & (tm < 0.0), val, 0.0)
         nodes, weights = lobe_rule(mu_m, kappa_m, n_s=n_s, n_phi=n_phi)
     return _integrate(t, f, nodes, weights)
@@ -281,11 +278,8 @@ FIGURE_ETA = 1.5
 
 def exact_moments(nodes, weights, density):
     """Mass, mean direction and moment-matched kappa of a density tabulated on a lobe rule."""
-    mass = np.sum(density * weights)
-    mean = np.sum(nodes * (density * weights)[:, None], axis=0)
-    mu = mean / np.linalg.norm(mean)
-    d = nodes - mu
-    return mass, mu, vmf.kappa_from_complement(np.sum(0.5 * dot(d, d) * density * weights) / mass)
+    mu, kappa = sample_moments(nodes, density * weights)
+    return np.sum(density * weights), mu, kappa
 
 
 def joint_warp_error(kind: str, cos_om: float, kappa_o: float, kappa_m: float, eta: float = FIGURE_ETA) -> dict:
@@ -305,7 +299,7 @@ def joint_warp_error(kind: str, cos_om: float, kappa_o: float, kappa_m: float, e
     nodes, weights = lobe_rule(mu_hat, kappa_hat)
     d_exact = exact(nodes)
     mass, mu, kappa = exact_moments(nodes, weights, d_exact)
-    l1 = np.sum(np.abs(d_exact - _lobe_density(nodes, mu_hat, kappa_hat)) * weights)
+    l1 = np.sum(np.abs(d_exact - vmf.density_around(nodes, mu_hat, kappa_hat)) * weights)
     angle = np.degrees(np.arccos(np.clip(mu @ mu_hat, -1.0, 1.0)))
     return {"mass": float(mass), "angle": float(angle), "kappa_error": float(kappa_hat / kappa - 1.0),
             "l1": float(l1)}

@@ -49,7 +49,7 @@ def test_chi2_catches_a_wrong_endf_kappa():
     p = params_from_dict(CASES["rough"])
     wo = _view(0.85, N)
     s = tc.sample(p, wo, np.random.default_rng(5).random((N, 3)))
-    found = tc._lobes_at(p, wo[:1])
+    found = tc.lobes_at(p, wo[:1])
     prob = tc._lobe_probabilities(p, wo[:1], found)[0]
 
     def wrong(wi):
@@ -91,7 +91,7 @@ def test_endf_kappa_is_the_joint_warp_chain():
         leave = p.kappa_top * warping.refraction_jacobian(-up, n, 1.0 / p.eta)
         kappa_i = vmf.convolve(vmf.convolve(entry, bottom), leave)
         expected = warping.endf_kappa_reflect(o, n, kappa_i)
-        got = tc._lobes_at(p, o)[1].kappa
+        got = tc.lobes_at(p, o)[1].kappa
         assert got == pytest.approx(expected, rel=1e-10)
 
 
@@ -102,12 +102,12 @@ def test_lobes_integrate_to_their_weights_when_sharp():
     for cos_o, low in ((0.9, 0.998), (0.5, 0.95)):
         wo = _view(cos_o)
         albedo = tc.directional_albedo(p, wo, n=20000, orders=True)[:, 0]
-        for lobe in tc._lobes_at(p, wo)[1:]:
+        for lobe in tc.lobes_at(p, wo)[1:]:
             assert np.all(low * lobe.weight[0] <= albedo[lobe.order])
             assert np.all(albedo[lobe.order] <= 1.002 * lobe.weight[0])
     grazing = _view(0.05)
     albedo = tc.directional_albedo(p, grazing, n=20000, orders=True)[:, 0]
-    assert np.all(albedo[1] <= tc._lobes_at(p, grazing)[1].weight[0] * 1.002)
+    assert np.all(albedo[1] <= tc.lobes_at(p, grazing)[1].weight[0] * 1.002)
 
 
 def test_index_matched_coat_leaves_the_bottom():
@@ -115,7 +115,7 @@ def test_index_matched_coat_leaves_the_bottom():
     view (the ENDF of a plain reflection is the NDF), weight F_b G1 G1."""
     p = params_from_dict({"eta": 1.0001, "kappa_top": 1e4, "kappa_bottom": 300, "bounces": 1,
                           "base": {"type": "dielectric_rough", "ior": 1.8}})
-    found = tc._lobes_at(p, _view(1.0))
+    found = tc.lobes_at(p, _view(1.0))
     albedo = tc.directional_albedo(p, _view(0.7), n=4096, orders=True)[:, 0, 0]
     assert albedo[0] < 1e-6 * albedo[1]
     assert found[1].kappa[0] == pytest.approx(300, rel=2e-3)
@@ -140,6 +140,7 @@ def test_extremes_are_finite_and_non_negative(base):
                     assert np.all(np.isfinite(f)) and np.all(f >= 0), (k1, k2, eta, sigma_d)
                     s = tc.sample(p, wo, rng.random((len(wo), 3)))
                     assert np.all(np.isfinite(s.weight)) and np.all(s.weight >= 0), (k1, k2, eta, sigma_d)
+                    assert np.allclose(np.linalg.norm(s.wi, axis=1), 1.0)
                     assert np.all(np.isfinite(s.pdf)) and np.all(s.pdf >= 0)
 
 
@@ -176,6 +177,7 @@ def test_slab_seen_from_below_is_the_slab_upside_down():
 
 def test_opaque_bases_give_nothing_below():
     p = params_from_dict(CASES["metal"])
+    assert np.all(tc.directional_albedo(p, _view(0.5) * [1, 1, -1], n=64) == 0)
     wi, wo = sphere_directions(100, seed=6), sphere_directions(100, seed=7, side=1)
     assert np.all(tc.eval(p, wi * [1, 1, -1] * np.sign(wi[:, 2:]), wo)[np.abs(wi[:, 2]) > 0] == 0)
     assert np.all(tc.eval(p, wo, wo * [1, 1, -1]) == 0)

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from addon.models.thin_coat import params_from_dict
-from addon.reference import vmf
+from addon.reference import vmf, warping
 from addon.reference.frames import dot
 from addon.reference.microfacet import fresnel_conductor, fresnel_dielectric
-from addon.reference.thin_coat_truth import (ground_truth, ground_truth_albedo, lobe_moments, projected_area_exact,
+from addon.reference.thin_coat_truth import (ground_truth, ground_truth_albedo, projected_area_exact,
                                              sample_visible_normals, smith_g1, surface_reflection)
 from stats import chi2_test
 
@@ -349,6 +349,6 @@ def test_lobe_moments_of_mirror_exit():
     p = _params(bounces=1)
     wo = _direction(0.6, 0.3)
     out = ground_truth_albedo(p, wo, n_paths=2000, seed=1)
-    mu, kappa = lobe_moments(*out["exits"]["reflection"][1])
+    mu, kappa = warping.sample_moments(*out["exits"]["reflection"][1])
     assert np.allclose(mu, wo * [-1.0, -1.0, 1.0], atol=1e-4)
     assert kappa > 1e4
