@@ -212,18 +212,16 @@ def cmd_compare(args) -> int:
 
 
 def _truth_settings(args):
-    """The Monte Carlo settings of ``compare --truth`` (thin coats, where the ground truth is installed)."""
+    """The Monte Carlo settings of ``compare --truth`` (models with a ground truth of their light paths)."""
     from .operators import compare_run
 
-    if args.model != "thin_coat":
-        raise CliError(f"--truth: model {args.model} has no path-traced ground truth here (thin_coat has; "
-                       f"SpongeCake's Monte Carlo comparison is --ms)")
     if not compare_run.has_truth(args.model):
-        raise CliError("--truth: the thin coat's Monte Carlo ground truth (addon/reference/thin_coat_truth.py) "
-                       "is not installed")
-    if args.truth_paths < 16 or args.truth_stride < 1:
-        raise CliError("--truth-paths must be ≥ 16 and --truth-stride ≥ 1")
-    return compare_run.CoatTruth(paths=args.truth_paths, stride=args.truth_stride, seed=args.seed)
+        raise CliError(f"--truth: {args.model} has no Monte Carlo ground truth of its light paths (thin_coat has; "
+                       f"SpongeCake's Monte Carlo comparison is --ms)")
+    try:
+        return compare_run.CoatTruth(paths=args.truth_paths, stride=args.truth_stride, seed=args.seed)
+    except ValueError as e:
+        raise CliError(f"--truth-paths / --truth-stride: {e}") from None
 
 
 def _ms_settings(args, p):

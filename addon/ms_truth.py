@@ -75,7 +75,7 @@ def _batches(fn, n_items: int, settings: TruthSettings):
     return out.mean(axis=0), out.std(axis=0, ddof=1) / np.sqrt(settings.batches)
 
 
-def _nearest(rc_to: np.ndarray, rc_from: np.ndarray, block: int = 4096) -> np.ndarray:
+def nearest(rc_to: np.ndarray, rc_from: np.ndarray, block: int = 4096) -> np.ndarray:
     """Index into rc_from of the nearest point for every point of rc_to (both (N, 2) pixel coordinates)."""
     out = np.empty(len(rc_to), dtype=int)
     for s0 in range(0, len(rc_to), block):
@@ -139,7 +139,7 @@ def multiple_scattering_truth(p, spec: ref_scenes.Scene, settings: TruthSettings
     # the picture: every hit pixel takes its nearest sample's value (own cosine), samples keep their own
     targets = np.flatnonzero(hit)
     rc = lambda ii: np.stack(np.divmod(ii, w), axis=1).astype(np.float64)  # noqa: E731
-    near = _nearest(rc(targets), rc(idx)) if k else np.zeros(len(targets), int)
+    near = nearest(rc(targets), rc(idx)) if k else np.zeros(len(targets), int)
     for f, cos_i in per_sample:
         if k:
             image[targets] += f[near] * (1.0 if cos_i is None else cos_i[targets, None])

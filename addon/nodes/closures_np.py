@@ -174,14 +174,22 @@ def dielectric(wi, wo, alpha, ior):
     return np.repeat(microfacet.dielectric_eval(wo, wi, alpha, ior)[:, None], 3, axis=1)
 
 
+def rational_beckmann_lambda(b, s):
+    """Cycles' Smith Λ for Beckmann as a function of s = α² tan²θ on an ``expr`` backend ``b`` (its rational
+    approximation, kernel ``bsdf_lambda_from_sqr_alpha_tan_n``): with a = 1 / sqrt(s), ((0.396 a − 1.259) a + 1) /
+    ((2.181 a + 3.535) a), and 0 for a ≥ 1.6 (s < 0.39)."""
+    flat = b.step_below(s, 0.39)
+    a = 1.0 / b.sqrt(b.maximum(s, 0.39))
+    return ((0.396 * a - 1.259) * a + 1.0) / ((2.181 * a + 3.535) * a) * (1.0 - flat)
+
+
 def beckmann_lambda(cos_v, alpha):
-    """Cycles' Smith Λ for Beckmann at cos θ = ``cos_v`` (its rational approximation, kernel
-    ``bsdf_lambda_from_sqr_alpha_tan_n``): with a = 1 / (α tan θ), ((0.396 a − 1.259) a + 1) / ((2.181 a + 3.535) a),
-    and 0 for a ≥ 1.6 (α² tan²θ < 0.39). Within 0.5% of 1 − G1's exact erf form's Λ."""
+    """Cycles' Smith Λ for Beckmann at cos θ = ``cos_v`` (``rational_beckmann_lambda`` in numpy)."""
+    from .expr import NumpyBackend
+
     c2 = np.minimum(np.asarray(cos_v, dtype=float) ** 2, 1.0)
     s = np.asarray(alpha, dtype=float) ** 2 * np.maximum(1.0 / np.maximum(c2, 1e-300) - 1.0, 0.0)
-    a = 1.0 / np.sqrt(np.maximum(s, 0.39))
-    return np.where(s < 0.39, 0.0, ((0.396 * a - 1.259) * a + 1.0) / ((2.181 * a + 3.535) * a))
+    return rational_beckmann_lambda(NumpyBackend, s)
 
 
 def beckmann_d(cos_h, alpha):

@@ -418,14 +418,15 @@ def _osl_default(kind: str, d) -> str:
 
 # Blender 4.2's node group: the Fresnel-weighted albedo of a Beckmann lobe over its Fresnel-free albedo is about
 # F(µ + (1 − µ) min(1, a α^q), η), the Fresnel at a cosine pulled towards normal incidence by the roughness; (a, q)
-# minimise the largest error over cos θo in [0.01, 1], α in [0.002, 1], η in [1.0001, 3]: 0.054 (0.87 for F(µ)).
+# minimise the largest error over cos θo in [0.01, 1], α in [0.002, 1], η in [1.0001, 3] (measured against F at the
+# view in tests/unit/test_thin_coat_mapping.py, test_blender_42_node_group_takes_the_lobes_mean_fresnel).
 LOBE_FRESNEL_FIT = (0.62286676, 0.99199374)
 
 
 def lobe_fresnel(b, color, eta, alpha):
     """Blender 4.2's node group (no Metallic BSDF node) for a Beckmann reflection with the dielectric Fresnel per
     microfacet: a Fresnel-free lobe whose colour takes the lobe's mean Fresnel by ``LOBE_FRESNEL_FIT`` (its energy;
-    F(cos θo) would be exact at the mirror configuration only and 7x too bright on the plane for rough coats).
+    F(cos θo) would be exact at the mirror configuration only and far too bright on the plane for rough coats).
     [approx: lobe-fresnel-blender-4.2]"""
     from .micrograin import fresnel_dielectric
 

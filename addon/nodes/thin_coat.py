@@ -18,15 +18,14 @@ in backend math), and each lobe becomes one closure whose weight depends on the 
   α = sqrt(2 / κ̂_k), kept in [sqrt(2 / 10⁶), 1] (Cycles clamps α to 1). The two lobes agree near the mirror
   configuration of narrow lobes; wide lobes (a rough bottom, grazing views: κ̂ ∝ cos²θo) differ in shape: the ENDF
   has no masking and divides by |o·h| where a microfacet lobe divides by cos θo. Scaling by the masking at the
-  mirror configuration (as for the top) overshoots the lobe's energy up to 60× at grazing views; the colour is
-  W_k ε(θo, κ̂), ε the ratio of the two lobes' energies by a fit (``energy_ratio``, within 13%).
+  mirror configuration (as for the top) overshoots the lobe's energy many times over at grazing views; the colour is
+  W_k ε(θo, κ̂), ε the ratio of the two lobes' energies by a fit (``energy_ratio``; ``energy_ratio_error``).
   [approx: endf-as-beckmann]
 * Diffuse order k (Lambertian base): a Diffuse BSDF of colour π W_k ē, the light-side factor entry(θi) (the
   crossing of the top and the absorption on the way in, ``reference.thin_coat.entry``) replaced by its
   cosine-weighted hemispherical mean ē (``mean_entry``, 3 nodes): a closure weight cannot depend on the light; the
-  energy under uniform light is kept. The view's entry(θo) (exact at the mirror configuration only) measured worse:
-  glazed_ceramic 8.0% against 0.7% in the furnace, 11% against 3.5% on the plane, 7.1% against 6.9% on the
-  sphere. [approx: diffuse-entry-mean] The hemispherical means inside the coat (r̄_i, and τ̄ = 2 E3(σa d) per
+  energy under uniform light is kept (the view's entry(θo), exact at the mirror configuration only, was tried and
+  measured worse on glazed_ceramic). [approx: diffuse-entry-mean] The hemispherical means inside the coat (r̄_i, and τ̄ = 2 E3(σa d) per
   channel) come from fits (``diffuse_means``; ``diffuse_means_error``: 4.5e-5 and 1.8e-4). [approx: diffuse-means-fit]
 * Slab transmission order j: the vMF lobe W_j M(i; −o, κ_j) of exit directions, as Cycles' Beckmann refraction
   without Fresnel around the closure normal o (the view itself) into a medium of relative IOR ``SLAB_IOR``: at
@@ -53,6 +52,8 @@ import numpy as np
 
 from ..models import thin_coat as model
 from ..reference import thin_coat as reference
+from ..reference.vmf import INVERSE_BELOW, SERIES_BELOW
+from .closures_np import rational_beckmann_lambda
 from .expr import MAX_MIX_WEIGHT
 from .micrograin import fresnel_dielectric
 from .spongecake import Socket
@@ -61,14 +62,12 @@ COAT_PANEL = "Coat"
 BASE_PANEL = "Base"
 SLAB_IOR = 10.0  # the slab's refraction closures: relative IOR of the medium they pretend to enter
 MAX_LOBE_KAPPA = model.MAX_KAPPA  # α ≥ sqrt(2 / 1e6) for every lobe
-SERIES_BELOW = 0.05  # below this κ, 1 − A3 from its series
-INVERSE_BELOW = 1e-3  # below this u, κ = 1 / u
 NEWTON_STEPS = {"osl": 2, "nodes": 0}  # refinements of Banerjee's inverse per form
 
 
 def _config(**kw) -> dict:
-    return {"kappa_top": 1e4, "kappa_bottom": 1e3, "eta": 1.5, "sigma_a": [0.0, 0.0, 0.0], "depth": 0.5,
-            "bounces": 1, "base": {"type": "dielectric_rough", "ior": 2.25}, **kw}
+    """The model's defaults (a clear coat over the paper's rough dielectric) with ``kw`` changed."""
+    return {**model.default_params().to_dict(), "bounces": 1, **kw}
 
 
 APPROXIMATIONS = {
@@ -237,12 +236,8 @@ def _inverse_g2(b, mu, alpha):
 
 
 def beckmann_lambda(b, mu, alpha):
-    """Cycles' rational Beckmann Λ at cos θ = µ ≥ MIN_COS: a = 1 / (α tan θ), ((0.396 a − 1.259) a + 1) / ((2.181 a +
-    3.535) a), 0 for α² tan²θ < 0.39 (a ≥ 1.6)."""
-    s = alpha * alpha * b.maximum(1.0 / (mu * mu) - 1.0, 0.0)
-    flat = b.step_below(s, 0.39)
-    a = 1.0 / b.sqrt(b.maximum(s, 0.39))
-    return ((0.396 * a - 1.259) * a + 1.0) / ((2.181 * a + 3.535) * a) * (1.0 - flat)
+    """Cycles' rational Beckmann Λ (``closures_np.rational_beckmann_lambda``) at cos θ = µ ≥ MIN_COS."""
+    return rational_beckmann_lambda(b, alpha * alpha * b.maximum(1.0 / (mu * mu) - 1.0, 0.0))
 
 
 # ------------------------------------------------------------------------------------------ vMF in backend math
@@ -300,10 +295,10 @@ def fresnel_conductor(b, c, eta, k):
 
 
 # r̄_e(η) = (c0 √t + c1 + c2 t + c3 t²) t with t = (η − 1) / (η + 1): the hemispherical Fresnel reflectance from
-# outside, least squares on η in [1.0001, 3] (largest error 6.8e-5 against a 400-node quadrature).
+# outside, least squares on η in [1.0001, 3] (``diffuse_means_error`` measures r̄_i).
 OUTSIDE_FRESNEL_FIT = (-1.11210002, 0.71264023, 1.19624816, 0.11152269)
 # 2 E3(x) ≈ e^{−x} (1 + a x + d x²) / (1 + (a + 1) x + c x² + d x³ / 2): exact at 0 with slope −2 and 2 e^{−x} / x
-# as x → ∞; (a, c, d) minimise the largest error over x in [0, 200] (1.8e-4; relative < 1% beyond x = 1).
+# as x → ∞; (a, c, d) minimise the largest error over x in [0, 200] (``diffuse_means_error`` measures it).
 TRANSMITTANCE_FIT = (11.8804906, 18.26160046, 8.95368252)
 
 

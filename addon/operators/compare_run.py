@@ -81,8 +81,6 @@ def has_principled(model_id: str) -> bool:
 def truth_module(model_id: str):
     """The model's Monte Carlo ground truth of its light paths (``reference.<model>_truth`` with
     ``ground_truth`` and ``ground_truth_albedo``), or None where there is none."""
-    if model_id != "thin_coat":
-        return None
     try:
         module = importlib.import_module(f"..reference.{model_id}_truth", __package__)
     except ImportError:
@@ -111,7 +109,7 @@ class CoatTruth:
 
     def __post_init__(self):
         if self.paths < 16 or self.stride < 1:
-            raise ValueError(f"bad ground-truth settings {self!r}: paths >= 16, stride >= 1")
+            raise ValueError(f"paths must be ≥ 16 and stride ≥ 1, got {self.paths} and {self.stride}")
 
 
 # Samples per pixel of the reference's directional albedo (furnace scene): ~0.7% relative noise.
@@ -260,20 +258,22 @@ def coat_truth_image(model_id: str, p, spec, settings: CoatTruth) -> dict:
             var[j] = spec.environment ** 2 * se.sum(axis=0)
             continue
         r, c = rows[j], cols[j]
-        for sun in spec.suns:
-            wi = ref_scenes.to_local(np.asarray(sun.direction, dtype=float), g["t"][r, c], g["b"][r, c], g["n"][r, c])
-            cos_i = abs(wi[2]) if (wi[2] > 0.0 or spec.kind != "sphere") else 0.0
-            if cos_i == 0.0:
-                continue
-            f, se = truth.ground_truth(p, wi[None], wo_l[j], n_paths=settings.paths, seed=seed)
-            value[j] += f.sum(axis=0)[0] * cos_i * sun.irradiance
-            var[j] += (se[:, 0] ** 2).sum(axis=0) * (cos_i * sun.irradiance) ** 2
+        wi = np.stack([ref_scenes.to_local(np.asarray(sun.direction, dtype=float), g["t"][r, c], g["b"][r, c],
+                                           g["n"][r, c]) for sun in spec.suns])
+        lit = (wi[:, 2] > 0.0) | (spec.kind != "sphere")
+        scale = np.where(lit, np.abs(wi[:, 2]), 0.0) * np.array([sun.irradiance for sun in spec.suns])
+        if not scale.any():
+            continue
+        # one walk serves every sun (their noise, correlated through the shared paths, is added as if independent)
+        f, se = truth.ground_truth(p, wi, wo_l[j], n_paths=settings.paths, seed=seed)
+        value[j] = (f.sum(axis=0) * scale[:, None]).sum(axis=0)
+        var[j] = ((se ** 2).sum(axis=0) * scale[:, None] ** 2).sum(axis=0)
     image = np.zeros((h, w, 3))
     noise = np.zeros((h, w, 3))
     image[rows, cols], noise[rows, cols] = value, np.sqrt(var)
     hit = np.argwhere(g["hit"])
     if len(rows):
-        nearest = ms_truth._nearest(hit.astype(float), np.stack([rows, cols], axis=1).astype(float))
+        nearest = ms_truth.nearest(hit.astype(float), np.stack([rows, cols], axis=1).astype(float))
         image[hit[:, 0], hit[:, 1]] = value[nearest]
         image[rows, cols] = value
     return {"image": image, "noise": noise, "samples": samples, "seconds": time.perf_counter() - t0}

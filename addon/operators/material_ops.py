@@ -13,6 +13,7 @@ from ..models import spongecake as model
 from ..models.params import ParamError
 from ..nodes import material as lamina_material
 from ..nodes import wrap
+from . import blend_io
 
 SCRATCH = "SCRATCH"
 LAYER_ITEMS = [(t, t.capitalize() if t != "hg" else "Henyey-Greenstein", "") for t in model.LAYER_TYPES]
@@ -98,13 +99,35 @@ class LAMINA_OT_add_spongecake(bpy.types.Operator):
             return {"CANCELLED"}
         for w in validated.warnings:
             self.report({"WARNING"}, w)
-        mat = lamina_material.new_material(model.ID, validated.params, self.form, name=name)
+        mat = built_or_reported(self, lambda: lamina_material.new_material(model.ID, validated.params, self.form,
+                                                                           name=name), "Could not build SpongeCake")
+        if mat is None:
+            return {"CANCELLED"}
         assign_to_active_slot(context.active_object, mat)
-        if self.form == "osl" and not context.scene.cycles.shading_system:
-            self.report({"WARNING"}, "OSL form: enable Render Properties > Open Shading Language (CPU or OptiX) "
-                                     "to see it; Lamina does not change scene settings")
+        warn_if_osl_is_off(self, context, self.form)
         self.report({"INFO"}, f"Added material {mat.name}")
         return {"FINISHED"}
+
+
+def warn_if_osl_is_off(op, context, form: str) -> None:
+    """Tell the user how to see an OSL form; the scene's settings are theirs to change."""
+    if form == "osl" and not context.scene.cycles.shading_system:
+        op.report({"WARNING"}, "OSL form: enable Render Properties > Open Shading Language (CPU or OptiX) to see "
+                               "it; Lamina does not change scene settings")
+
+
+def built_or_reported(op, build, failure: str):
+    """``build()``'s material, or None after reporting ``failure`` and removing whatever the failed build had
+    already created (e.g. the material before its OSL script failed to compile)."""
+    before = blend_io.snapshot()
+    try:
+        return build()
+    except ParamError as e:
+        op.report({"ERROR"}, str(e))
+    except Exception as e:  # noqa: BLE001 - e.g. an OSL compile failure
+        op.report({"ERROR"}, f"{failure}: {type(e).__name__}: {e}")
+    blend_io.remove_new_data(before)
+    return None
 
 
 def assign_to_active_slot(obj, mat) -> None:
@@ -135,8 +158,7 @@ class LAMINA_OT_set_form(bpy.types.Operator):
         except Exception as e:  # noqa: BLE001 - e.g. OSL compile failure: report, leave the material as it was
             self.report({"ERROR"}, f"Could not switch {mat.name}: {e}")
             return {"CANCELLED"}
-        if self.form == "osl" and not context.scene.cycles.shading_system:
-            self.report({"WARNING"}, "Enable Render Properties > Open Shading Language to render the OSL form")
+        warn_if_osl_is_off(self, context, self.form)
         return {"FINISHED"}
 
 
@@ -290,13 +312,10 @@ class LAMINA_OT_add_porous_layer(bpy.types.Operator):
             return {"CANCELLED"}
         warnings = []
         name = f"{source.name} + {wrap.label(None if self.preset == CUSTOM else self.preset)}"
-        try:
-            mat = wrap.add_porous_layer(source, self.layer_dict(), self.form, name=name, warnings=warnings)
-        except ParamError as e:
-            self.report({"ERROR"}, str(e))
-            return {"CANCELLED"}
-        except Exception as e:  # noqa: BLE001 - e.g. OSL compile failure: report; nothing was created
-            self.report({"ERROR"}, f"Could not add a porous layer to {source.name}: {e}")
+        mat = built_or_reported(
+            self, lambda: wrap.add_porous_layer(source, self.layer_dict(), self.form, name=name, warnings=warnings),
+            f"Could not add a porous layer to {source.name}")
+        if mat is None:
             return {"CANCELLED"}
         for w in warnings:
             self.report({"WARNING"}, w)
@@ -306,9 +325,7 @@ class LAMINA_OT_add_porous_layer(bpy.types.Operator):
                 self.report({"INFO"}, f"{source.name} is no longer used: kept with a fake user so saving keeps it")
         elif wrap.keep(mat):
             self.report({"INFO"}, f"{mat.name} is not assigned: kept with a fake user (pick it in a slot)")
-        if self.form == "osl" and not context.scene.cycles.shading_system:
-            self.report({"WARNING"}, "OSL form: enable Render Properties > Open Shading Language (CPU or OptiX) "
-                                     "to see it; Lamina does not change scene settings")
+        warn_if_osl_is_off(self, context, self.form)
         self.report({"INFO"}, f"Added material {mat.name} (a porous layer over {source.name})")
         return {"FINISHED"}
 
@@ -363,12 +380,7 @@ BASE_ITEMS = [(key, thin_coat.BASE_LABELS[key], description) for key, descriptio
     ("slab", "No base: a free-standing thin transparent sheet that reflects and transmits (leaves of glass, "
              "foils, varnish films)"))]
 # Complex IORs (R, G, B at about 650, 550, 450 nm) of common metals, rounded from published tables.
-METALS = {
-    "aluminium": micrograin.CONDUCTORS["aluminium"],
-    "gold": micrograin.CONDUCTORS["gold"],
-    "copper": ((0.271, 0.677, 1.316), (3.609, 2.625, 2.292)),
-    "silver": ((0.159, 0.145, 0.135), (3.929, 3.190, 2.381)),
-}
+METALS = {k: micrograin.CONDUCTORS[k] for k in ("aluminium", "gold", "copper", "silver")}
 METAL_ITEMS = [(k, k.capitalize(), f"A base of {k} (complex IOR, RGB)") for k in METALS] + [
     (CUSTOM, "Custom", "Set the metal's complex IOR (n, k) below")]
 
@@ -508,15 +520,12 @@ class LAMINA_OT_add_thin_coat(bpy.types.Operator):
         for w in validated.warnings:
             self.report({"WARNING"}, w)
         name = f"{thin_coat.LABEL} {wrap.label(self.preset)}" if self.preset != CUSTOM else thin_coat.LABEL
-        try:
-            mat = lamina_material.new_material(thin_coat.ID, validated.params, self.form, name=name)
-        except Exception as e:  # noqa: BLE001 - e.g. OSL compile failure: report; nothing was created
-            self.report({"ERROR"}, f"Could not build the Thin Coat material: {type(e).__name__}: {e}")
+        mat = built_or_reported(self, lambda: lamina_material.new_material(thin_coat.ID, validated.params, self.form,
+                                                                           name=name), "Could not build the Thin Coat material")
+        if mat is None:
             return {"CANCELLED"}
         assign_to_active_slot(context.active_object, mat)
-        if self.form == "osl" and not context.scene.cycles.shading_system:
-            self.report({"WARNING"}, "OSL form: enable Render Properties > Open Shading Language (CPU or OptiX) "
-                                     "to see it; Lamina does not change scene settings")
+        warn_if_osl_is_off(self, context, self.form)
         self.report({"INFO"}, f"Added material {mat.name}")
         return {"FINISHED"}
 

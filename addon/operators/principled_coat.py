@@ -51,7 +51,7 @@ def supports(model_id: str) -> bool:
 
 def roughness(kappa: float) -> float:
     """Principled's roughness for an interface of concentration κ: (2 / κ)^(1/4) (module docstring), ≤ 1."""
-    return min(math.sqrt(math.sqrt(2.0 / kappa)), 1.0)
+    return min(math.sqrt(thin_coat.roughness_from_kappa(kappa)), 1.0)
 
 
 def _conductor_colors(p) -> tuple[tuple, tuple]:
@@ -87,14 +87,6 @@ def settings(p) -> dict:
     else:  # slab
         out.update({"Base Color": (1.0, 1.0, 1.0), "Metallic": 0.0, "Transmission Weight": 1.0, "IOR": float(p.eta)})
     return out
-
-
-def describe(p) -> str:
-    """One line: the Principled values that differ from its defaults."""
-    def fmt(v):
-        return f"({', '.join(f'{c:.3g}' for c in v)})" if isinstance(v, tuple) else f"{v:.3g}"
-
-    return ", ".join(f"{k} {fmt(v)}" for k, v in settings(p).items())
 
 
 def new_material(p, name: str = "Lamina Principled coat"):

@@ -74,7 +74,7 @@ def test_structure_key_is_the_base_type_and_the_bounces():
     assert mapping.structure_key(_params({"base": {"type": "slab"}})) != mapping.structure_key(a)
 
 
-def test_every_approximation_config_is_valid_and_uses_the_mapping():
+def test_every_approximation_config_is_valid():
     for name, (what, config) in mapping.APPROXIMATIONS.items():
         assert model.validate(config).warnings == [], name
         assert what
