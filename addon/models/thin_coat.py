@@ -78,13 +78,19 @@ STACK = (
 )
 
 
+def _default(base: str, name: str):
+    return next(prm.default for prm in BASE[base] if prm.name == name)
+
+
 @dataclass(frozen=True)
 class Base:
+    """The base under the coat; only the fields its type declares (``BASE``) matter, the others keep defaults."""
+
     type: str
-    ior: float = 1.5
-    eta: tuple = (1.5, 1.5, 1.5)
-    k: tuple = (0.0, 0.0, 0.0)
-    albedo: tuple = (0.8, 0.8, 0.8)
+    ior: float = _default("dielectric_rough", "ior")
+    eta: tuple = _default("conductor", "eta")
+    k: tuple = _default("conductor", "k")
+    albedo: tuple = _default("diffuse", "albedo")
 
 
 @dataclass(frozen=True)
