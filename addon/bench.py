@@ -69,6 +69,30 @@ def ground_truth_error(p, n_dirs: int = 4, n_paths: int = 20000, seed: int = 1) 
     return float(np.abs(analytic - single).mean() / np.abs(single).mean())
 
 
+def approximation_rows(model, approximations: dict, resolution: int, short=None) -> list[str]:
+    """Table rows of ``mapping_errors`` for each named approximation's configuration and scene: name, what it does,
+    the configuration (``short(config)``, when given), scene, reference mean, OSL, node group."""
+    rows = []
+    for name, (what, config) in approximations.items():
+        errs = mapping_errors(model.params_from_dict(config), resolution, model.ID)
+        shown = f" `{short(config)}` |" if short else ""
+        for scene in ACCURACY_SCENES:
+            rows.append(f"| {name} | {what} |{shown} {scene} | {errs['mean'][scene]:.4f} | {pct(errs['osl'][scene])} | "
+                        f"{pct(errs['nodes'][scene])} |")
+    return rows
+
+
+def preset_rows(model, resolution: int) -> list[str]:
+    """The "## Presets" table of ``mapping_errors`` for each of the model's presets and scene."""
+    lines = ["", "## Presets", "", "| preset | scene | ref. mean | OSL | node group |", "|---|---|---|---|---|"]
+    for name in presets.names(model.ID):
+        errs = mapping_errors(model.params_from_dict(presets.load(model.ID, name)), resolution, model.ID)
+        for scene in ACCURACY_SCENES:
+            lines.append(f"| {name} | {scene} | {errs['mean'][scene]:.4f} | {pct(errs['osl'][scene])} | "
+                         f"{pct(errs['nodes'][scene])} |")
+    return lines
+
+
 def reference_throughput(p, n: int = 200_000, repeats: int = 3, model_id: str = MODEL) -> float:
     """Reference ``eval`` calls per second on random direction pairs (fastest of ``repeats``; the first call also
     warms caches such as micrograin's specular albedo table)."""

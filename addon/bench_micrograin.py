@@ -14,7 +14,8 @@ import math
 import numpy as np
 
 from . import presets
-from .bench import ACCURACY_SCENES, fastest_renders, mapping_errors, pct, reference_throughput
+from .bench import (approximation_rows, fastest_renders, pct, preset_rows,
+                    reference_throughput)
 from .models import micrograin as model
 from .nodes import micrograin as mapping
 from .reference import micrograin as reference
@@ -182,17 +183,8 @@ def accuracy_markdown(resolution: int) -> str:
               "Relative RMSE of the form's numpy prediction against the reference (as in the SpongeCake sections).",
               "", "| approximation | what it does | configuration | scene | ref. mean | OSL | node group |",
               "|---|---|---|---|---|---|---|"]
-    for name, (what, config) in mapping.APPROXIMATIONS.items():
-        errs = mapping_errors(model.params_from_dict(config), resolution, MODEL)
-        for scene in ACCURACY_SCENES:
-            lines.append(f"| {name} | {what} | `{_short(config)}` | {scene} | {errs['mean'][scene]:.4f} | "
-                         f"{pct(errs['osl'][scene])} | {pct(errs['nodes'][scene])} |")
-    lines += ["", "## Presets", "", "| preset | scene | ref. mean | OSL | node group |", "|---|---|---|---|---|"]
-    for name in presets.names(MODEL):
-        errs = mapping_errors(model.params_from_dict(presets.load(MODEL, name)), resolution, MODEL)
-        for scene in ACCURACY_SCENES:
-            lines.append(f"| {name} | {scene} | {errs['mean'][scene]:.4f} | {pct(errs['osl'][scene])} | "
-                         f"{pct(errs['nodes'][scene])} |")
+    lines += approximation_rows(model, mapping.APPROXIMATIONS, resolution, _short)
+    lines += preset_rows(model, resolution)
     lines += ["", "## The view-only stand-in for w⁺", "",
               "w⁺ = 1 − g(θi) g(θo) needs the light direction, which a closure weight cannot see. Candidates for "
               "g(θi), each alone (everything else exact): the mirror configuration g(θo), which the Cycles forms "

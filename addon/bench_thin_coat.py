@@ -11,7 +11,7 @@ import itertools
 import numpy as np
 
 from . import presets
-from .bench import ACCURACY_SCENES, fastest_renders, mapping_errors, pct, reference_throughput, timed
+from .bench import approximation_rows, fastest_renders, pct, preset_rows, reference_throughput, timed
 from .models import thin_coat as model
 from .reference import thin_coat as reference
 from .reference import thin_coat_truth as truth
@@ -247,18 +247,7 @@ def _mapping_section(resolution: int) -> list[str]:
              "(endf-as-beckmann) is present in every configuration with subsurface orders, so an approximation of "
              "the node group alone (kappa-without-newton) shows as the difference between the two columns.",
              "", "| approximation | what it does | scene | ref. mean | OSL | node group |", "|---|---|---|---|---|---|"]
-    for name, (what, config) in mapping.APPROXIMATIONS.items():
-        errs = mapping_errors(model.params_from_dict(config), resolution, MODEL)
-        for scene in ACCURACY_SCENES:
-            lines.append(f"| {name} | {what} | {scene} | {errs['mean'][scene]:.4f} | {pct(errs['osl'][scene])} | "
-                         f"{pct(errs['nodes'][scene])} |")
-    lines += ["", "## Presets", "", "| preset | scene | ref. mean | OSL | node group |", "|---|---|---|---|---|"]
-    for name in presets.names(MODEL):
-        errs = mapping_errors(model.params_from_dict(presets.load(MODEL, name)), resolution, MODEL)
-        for scene in ACCURACY_SCENES:
-            lines.append(f"| {name} | {scene} | {errs['mean'][scene]:.4f} | {pct(errs['osl'][scene])} | "
-                         f"{pct(errs['nodes'][scene])} |")
-    return lines
+    return lines + approximation_rows(model, mapping.APPROXIMATIONS, resolution) + preset_rows(model, resolution)
 
 
 # ------------------------------------------------------------------------------------------ speed
@@ -324,7 +313,7 @@ def speed_markdown(samples: int, resolution: int) -> str:
         lines.append(f"| {r['preset']} | {r['nodes']:.2f} | {r['osl']:.2f} | {r['nodes'] / one['nodes']:.2f} | "
                      f"{r['osl'] / one['osl']:.2f} |")
     lines += ["", "### Node group : OSL : Principled coat", "",
-              f"Same scene and settings, each preset (default 2 bounces) against Blender's Principled BSDF with a "
+              "Same scene and settings, each preset (default 2 bounces) against Blender's Principled BSDF with a "
               "coat of the same roughness and IOR.", "",
               "| preset | node group s | OSL s | Principled coat s | node group : Principled | OSL : Principled |",
               "|---|---|---|---|---|---|"]

@@ -268,10 +268,7 @@ class LAMINA_OT_add_porous_layer(bpy.types.Operator):
         if self.grain_type == "dielectric":
             col.prop(self, "grain_ior")
         if self.grain_type == "conductor":
-            col.prop(self, "conductor")
-            if self.conductor == CUSTOM:
-                col.prop(self, "conductor_ior")
-                col.prop(self, "conductor_k")
+            draw_conductor(col, self, "conductor")
 
     def _other_control(self) -> str:
         """The value the chosen roughness control implies for the other one (Eq. 18)."""
@@ -298,8 +295,7 @@ class LAMINA_OT_add_porous_layer(bpy.types.Operator):
         if self.grain_type == "dielectric":
             grain["ior"] = self.grain_ior
         if self.grain_type == "conductor":
-            ior, k = ((self.conductor_ior, self.conductor_k) if self.conductor == CUSTOM
-                      else micrograin.CONDUCTORS[self.conductor])
+            ior, k = conductor_values(self, "conductor")
             grain["ior"], grain["k"] = list(ior), list(k)
         data["grain"] = grain
         return data
@@ -328,6 +324,22 @@ class LAMINA_OT_add_porous_layer(bpy.types.Operator):
         warn_if_osl_is_off(self, context, self.form)
         self.report({"INFO"}, f"Added material {mat.name} (a porous layer over {source.name})")
         return {"FINISHED"}
+
+
+def draw_conductor(col, op, choice: str) -> None:
+    """The conductor enum ``choice`` of a dialog, and its ``<choice>_ior`` / ``<choice>_k`` when Custom."""
+    col.prop(op, choice)
+    if getattr(op, choice) == CUSTOM:
+        col.prop(op, f"{choice}_ior")
+        col.prop(op, f"{choice}_k")
+
+
+def conductor_values(op, choice: str) -> tuple:
+    """(n, k) of the conductor a dialog's enum ``choice`` names, or of its Custom ``<choice>_ior`` / ``<choice>_k``."""
+    name = getattr(op, choice)
+    if name == CUSTOM:
+        return tuple(getattr(op, f"{choice}_ior")), tuple(getattr(op, f"{choice}_k"))
+    return micrograin.CONDUCTORS[name]
 
 
 class PorousError(Exception):
@@ -487,10 +499,7 @@ class LAMINA_OT_add_thin_coat(bpy.types.Operator):
         elif self.base_type == "dielectric_rough":
             col.prop(self, "base_ior")
         elif self.base_type == "conductor":
-            col.prop(self, "metal")
-            if self.metal == CUSTOM:
-                col.prop(self, "metal_ior")
-                col.prop(self, "metal_k")
+            draw_conductor(col, self, "metal")
 
     def coat_dict(self) -> dict:
         """The thin-coat dict the dialog describes (a preset's or the Custom settings) with the dialog's bounces."""
@@ -505,7 +514,7 @@ class LAMINA_OT_add_thin_coat(bpy.types.Operator):
             elif self.base_type == "dielectric_rough":
                 base["ior"] = self.base_ior
             elif self.base_type == "conductor":
-                ior, k = (self.metal_ior, self.metal_k) if self.metal == CUSTOM else METALS[self.metal]
+                ior, k = conductor_values(self, "metal")
                 base["eta"], base["k"] = list(ior), list(k)
             data["base"] = base
         data = {k: v for k, v in data.items() if k not in ("name", "description")}

@@ -11,29 +11,17 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from addon.nodes import closures_np, osl  # noqa: E402
-from addon.nodes.material import empty_material  # noqa: E402
+from addon.nodes import closures_np  # noqa: E402
 from addon.operators.cycles_render import render_cycles  # noqa: E402
 from addon.reference import metrics  # noqa: E402
 from addon.reference import scenes as S  # noqa: E402
 from addon.reference.frames import normalize  # noqa: E402
+from renders import closure_material  # noqa: E402
 
 pytestmark = pytest.mark.blender
-SOURCE = '#include "stdcycles.h"\nshader t(vector LaminaTangent = vector(0), output closure color BSDF = 0) {{ BSDF = {}; }}'
-
-
 @pytest.fixture(autouse=True)
 def clean_file():
     bpy.ops.wm.read_factory_settings(use_empty=True)
-
-
-def _osl_material(closure: str):
-    mat, tree, out = empty_material("fact")
-    node = tree.nodes.new("ShaderNodeScript")
-    osl.load_into_script_node(node, osl.compile_source(SOURCE.format(closure)))
-    tree.links.new(node.outputs["BSDF"], out.inputs["Surface"])
-    tree.links.new(tree.nodes.new("ShaderNodeNewGeometry").outputs["Tangent"], node.inputs["LaminaTangent"])
-    return mat
 
 
 def _spongecake_like_transmission(alpha):
@@ -55,7 +43,7 @@ def _rel(material, spec, bsdf, samples=64):
 
 
 def test_ior_1_refraction_has_spongecake_transmission_form_under_a_sun_but_is_transparent_in_a_furnace():
-    mat = _osl_material('microfacet("ggx", N, LaminaTangent, 0.3, 0.3, 1.0, 1)')
+    mat = closure_material('microfacet("ggx", N, LaminaTangent, 0.3, 0.3, 1.0, 1)')
     err, _, _ = _rel(mat, S.backlit_scene(resolution=(32, 16)), _spongecake_like_transmission(0.3))
     assert err < 0.01
     _, furnace, integral = _rel(mat, S.furnace_scene(resolution=(16, 8)), _spongecake_like_transmission(0.3))
@@ -64,13 +52,13 @@ def test_ior_1_refraction_has_spongecake_transmission_form_under_a_sun_but_is_tr
 
 def test_microfacet_alpha_is_clamped_to_one():
     spec = S.plane_scene(resolution=(32, 16))
-    at_one = _rel(_osl_material('microfacet("ggx", N, LaminaTangent, 1.0, 1.0, 1.0, 0)'), spec,
+    at_one = _rel(closure_material('microfacet("ggx", N, LaminaTangent, 1.0, 1.0, 1.0, 0)'), spec,
                   lambda wi, wo: closures_np.ggx_reflection(wi, wo, 1.0))[0]
-    at_five = _rel(_osl_material('microfacet("ggx", N, LaminaTangent, 5.0, 5.0, 1.0, 0)'), spec,
+    at_five = _rel(closure_material('microfacet("ggx", N, LaminaTangent, 5.0, 5.0, 1.0, 0)'), spec,
                    lambda wi, wo: closures_np.ggx_reflection(wi, wo, 1.0))[0]
     assert at_one < 0.01 and at_five < 0.01
 
 
 def test_anisotropic_refraction_uses_alpha_x_only():
-    mat = _osl_material('microfacet("ggx", N, LaminaTangent, 0.1, 1.0, 1.0, 1)')
+    mat = closure_material('microfacet("ggx", N, LaminaTangent, 0.1, 1.0, 1.0, 1)')
     assert _rel(mat, S.backlit_scene(resolution=(32, 16)), _spongecake_like_transmission(0.1))[0] < 0.01

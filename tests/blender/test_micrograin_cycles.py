@@ -8,9 +8,9 @@ bpy = pytest.importorskip("bpy")
 from addon import presets  # noqa: E402
 from addon.models import micrograin as model  # noqa: E402
 from addon.nodes import material, predicted_image  # noqa: E402
-from addon.operators.cycles_render import render_cycles  # noqa: E402
 from addon.reference import metrics  # noqa: E402
 from addon.reference import scenes as S  # noqa: E402
+from renders import relative_error, render  # noqa: E402
 
 pytestmark = pytest.mark.blender
 SPHERE = S.sphere_scene(resolution=32)
@@ -23,16 +23,6 @@ FURNACE = S.furnace_scene(resolution=(24, 12))
 def clean_file():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     yield
-
-
-def _render(mat, spec, samples, tmp_path):
-    img, _ = render_cycles(mat, spec, samples, 0, str(tmp_path / f"{spec.name}.exr"))
-    return img
-
-
-def _relative(img, predicted, spec):
-    mask = S.scene_mask(spec)
-    return metrics.rmse(img, predicted, mask) / max(predicted[mask].mean(), 1e-3)
 
 
 # Beyond the presets: dense metal grains, whose specular weight (G ratio ≥ 1) exceeds 1 at oblique views.
@@ -49,8 +39,8 @@ def test_cycles_renders_the_predicted_mapping(name, form, tmp_path):
     scenes = [SPHERE, FURNACE, PLANE] if name == "dense_metal" else [SPHERE, FURNACE]
     scenes += [BACKLIT] if p.bulk.type == "dielectric" else []
     for spec in scenes:
-        img = _render(mat, spec, 128 if spec is FURNACE else 32, tmp_path)
-        err = _relative(img, predicted_image(model.ID, p, form, spec), spec)
+        img = render(mat, spec, 128 if spec is FURNACE else 32, tmp_path)
+        err = relative_error(img, predicted_image(model.ID, p, form, spec), spec)
         assert err < _tolerance(p, spec, form), f"{name} {form} {spec.name}: {err:.4f}"
 
 
@@ -91,7 +81,7 @@ def test_extremes_render_finite_non_negative_pixels(case, form, tmp_path):
     mat = material.new_material(model.ID, p, form)
     scenes = (S.sphere_scene(resolution=24), S.plane_scene(resolution=(24, 12)), S.furnace_scene(resolution=(16, 8)))
     for spec in scenes:
-        img = _render(mat, spec, 16, tmp_path)
+        img = render(mat, spec, 16, tmp_path)
         assert np.isfinite(img).all() and (img >= 0).all(), f"{case} {form} {spec.name}"
 
 
@@ -113,7 +103,7 @@ def test_a_texture_drives_the_filling_factor(form, tmp_path):
     tree.links.new(split.outputs["X"], mask.inputs["Value"])
     node = material.shader_node(mat)
     tree.links.new(mask.outputs["Result"], node.inputs["Filling Factor" if form == "nodes" else "Filling_Factor"])
-    img = _render(mat, SPHERE, 32, tmp_path)
+    img = render(mat, SPHERE, 32, tmp_path)
     w = SPHERE.width
     for value, columns in ((low, slice(0, w // 2 - 2)), (high, slice(w // 2 + 2, w))):
         predicted = predicted_image(model.ID, model.params_from_dict({**base, "filling_factor": value}), form, SPHERE)

@@ -16,7 +16,6 @@ import addon  # noqa: E402
 from addon import presets  # noqa: E402
 from addon.bake.exr import read_exr, read_png  # noqa: E402
 from addon.models import thin_coat as model  # noqa: E402
-from addon.nodes import MAPPINGS  # noqa: E402
 from addon.nodes import material  # noqa: E402
 from addon.operators import compare_run, principled_coat  # noqa: E402
 from addon.reference import metrics, microfacet  # noqa: E402
@@ -25,8 +24,6 @@ from addon.reference import thin_coat as ref  # noqa: E402
 
 pytestmark = pytest.mark.blender
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-needs_mapping = pytest.mark.skipif(model.ID not in MAPPINGS, reason="the thin coat's Cycles mapping is not registered")
-needs_truth = pytest.mark.skipif(not compare_run.has_truth(model.ID), reason="reference.thin_coat_truth not installed")
 SLAB = {"kappa_top": 300, "kappa_bottom": 300, "eta": 1.5, "sigma_a": [0.2, 0.4, 0.8], "depth": 0.5, "bounces": 1,
         "base": {"type": "slab"}}
 
@@ -115,7 +112,6 @@ def test_default_scenes_show_backlit_only_for_a_slab():
 # ------------------------------------------------------------------------------------ the ground truth
 
 
-@needs_truth
 @pytest.mark.parametrize("kind", ["plane", "furnace"])
 def test_coat_truth_image_is_the_simulation_at_sampled_pixels(kind):
     """Each sampled pixel is the sum over orders of the simulated f times the sun's irradiance and cos θi (the
@@ -151,7 +147,6 @@ def test_coat_truth_image_is_the_simulation_at_sampled_pixels(kind):
 # ------------------------------------------------------------------------------------ with the mapping
 
 
-@needs_mapping
 def test_compare_params_with_the_principled_coat(tmp_path):
     p = _preset("varnished_metal")
     report = compare_run.compare_params(model.ID, p, ["nodes"], None, 4, 16, 0, str(tmp_path), principled=True)
@@ -165,7 +160,6 @@ def test_compare_params_with_the_principled_coat(tmp_path):
     assert "Principled coat vs reference: rel. RMSE" in compare_run.summary_lines(report)
 
 
-@needs_mapping
 def test_the_compare_operator_shows_the_principled_panel():
     addon.register()
     try:
@@ -181,20 +175,16 @@ def test_the_compare_operator_shows_the_principled_panel():
         addon.unregister()
 
 
-@needs_mapping
 def test_cli_compare_thin_coat_with_principled_and_truth(tmp_path):
     args = [sys.executable, "-m", "addon.cli", "compare", "--model", "thin_coat", "--preset", "glazed_ceramic",
             "--principled", "--forms", "osl", "--scenes", "sphere,furnace", "--samples", "4", "--resolution", "16",
             "--out", str(tmp_path / "out")]
-    truth = compare_run.has_truth(model.ID)
-    if truth:
-        args += ["--truth", "--truth-paths", "64", "--truth-stride", "8"]
+    args += ["--truth", "--truth-paths", "64", "--truth-stride", "8"]
     done = subprocess.run(args, cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     for scene in ("sphere", "furnace"):
         e = report["forms"]["osl"][scene]
         assert np.isfinite(e["principled"]["rel_rmse"])
-        if truth:
-            assert {"reference_vs_truth", "cycles_vs_truth", "principled_vs_truth", "truth_noise"} <= set(e["truth"])
+        assert {"reference_vs_truth", "cycles_vs_truth", "principled_vs_truth", "truth_noise"} <= set(e["truth"])
     assert "Principled coat vs reference" in done.stdout

@@ -16,10 +16,9 @@ from addon import presets  # noqa: E402
 from addon.models import thin_coat as model  # noqa: E402
 from addon.nodes import closures_np, expr, material, osl, predicted_image  # noqa: E402
 from addon.nodes import thin_coat as mapping  # noqa: E402
-from addon.nodes.material import empty_material  # noqa: E402
-from addon.operators.cycles_render import render_cycles  # noqa: E402
 from addon.reference import metrics  # noqa: E402
 from addon.reference import scenes as S  # noqa: E402
+from renders import closure_material, relative_error, render  # noqa: E402
 
 pytestmark = pytest.mark.blender
 METALLIC = hasattr(bpy.types, "ShaderNodeBsdfMetallic")  # Blender 4.3+
@@ -42,16 +41,6 @@ def clean_file(monkeypatch):
     yield
 
 
-def _render(mat, spec, samples, tmp_path):
-    img, _ = render_cycles(mat, spec, samples, 0, str(tmp_path / f"{spec.name}.exr"))
-    return img
-
-
-def _relative(img, predicted, spec):
-    mask = S.scene_mask(spec)
-    return metrics.rmse(img, predicted, mask) / max(predicted[mask].mean(), 1e-3)
-
-
 @pytest.mark.parametrize("name", presets.names(model.ID) + sorted(SLABS))
 @pytest.mark.parametrize("form", ["nodes", "osl"])
 def test_cycles_renders_the_predicted_mapping(name, form, tmp_path):
@@ -60,8 +49,8 @@ def test_cycles_renders_the_predicted_mapping(name, form, tmp_path):
     p = model.params_from_dict(SLABS[name] if name in SLABS else presets.load(model.ID, name))
     mat = material.new_material(model.ID, p, form)
     for spec in [SPHERE, FURNACE] + ([BACKLIT] if p.transmits else []):
-        img = _render(mat, spec, 128 if spec is FURNACE else 32, tmp_path)
-        err = _relative(img, predicted_image(model.ID, p, form, spec), spec)
+        img = render(mat, spec, 128 if spec is FURNACE else 32, tmp_path)
+        err = relative_error(img, predicted_image(model.ID, p, form, spec), spec)
         sharp = min(p.kappa_top, p.kappa_bottom) >= 1e3 and spec is SPHERE
         assert err < (0.03 if sharp else 0.02), f"{name} {form} {spec.name}: {err:.4f}"
 
@@ -74,25 +63,12 @@ def test_the_largest_node_groups_fit_cycles_svm_stack(base, tmp_path):
                                 "base": {"type": base}})
     mat = material.new_material(model.ID, p, "nodes")
     spec = S.sphere_scene(resolution=24)
-    img = _render(mat, spec, 16, tmp_path)
+    img = render(mat, spec, 16, tmp_path)
     predicted = predicted_image(model.ID, p, "nodes", spec)
-    assert img.max() > 0.0 and _relative(img, predicted, spec) < 0.02
+    assert img.max() > 0.0 and relative_error(img, predicted, spec) < 0.02
 
 
 # ------------------------------------------------------------------------------------------ the closures alone
-
-SOURCE = ('#include "stdcycles.h"\nshader t(vector LaminaTangent = vector(0), output closure color BSDF = 0) '
-          '{{ vector Tn = normalize(LaminaTangent); BSDF = {}; }}')
-
-
-def _osl_material(closure: str):
-    mat, tree, out = empty_material("fact")
-    node = tree.nodes.new("ShaderNodeScript")
-    osl.load_into_script_node(node, osl.compile_source(SOURCE.format(closure)))
-    tree.links.new(node.outputs["BSDF"], out.inputs["Surface"])
-    tree.links.new(tree.nodes.new("ShaderNodeNewGeometry").outputs["Tangent"], node.inputs["LaminaTangent"])
-    return mat
-
 
 def _closure_error(mat, spec, kind, tmp_path, **kw):
     evaluate = closures_np.EVAL[kind]
@@ -105,7 +81,7 @@ def _closure_error(mat, spec, kind, tmp_path, **kw):
         args = {k: (wo if v == "view" else v) for k, v in kw.items()}
         return closures_np.ALBEDO[kind](wo, **args)
 
-    img = _render(mat, spec, 256 if spec.kind == "furnace" else 16, tmp_path)
+    img = render(mat, spec, 256 if spec.kind == "furnace" else 16, tmp_path)
     ref = S.reference_image(spec, bsdf, bsdf_albedo=albedo)
     mask = S.scene_mask(spec)
     return metrics.rmse(img, ref, mask) / max(ref[mask].mean(), 1e-3)
@@ -123,7 +99,7 @@ def test_cycles_beckmann_closures_are_what_closures_np_says(closure, kind, kw, s
     """OSL's Fresnel-free Beckmann reflection, the reflection-only dielectric (Fresnel per microfacet, nothing
     transmitted), and the Fresnel-free refraction around the view: Cycles' eval (rational Λ, height-correlated G2,
     α clamped to 1) and albedo as closures_np computes them, within 1% (measured 0.04-0.4%)."""
-    mat = _osl_material(closure)
+    mat = closure_material(closure)
     for spec in scenes:
         err = _closure_error(mat, spec, kind, tmp_path, **kw)  # backlit reflection: black (nothing transmitted)
         assert err < 0.01, f"{closure} {spec.name}: {err:.4f}"
@@ -155,7 +131,7 @@ def test_extremes_render_finite_non_negative_pixels(case, form, tmp_path):
     mat = material.new_material(model.ID, p, form)
     for spec in (S.sphere_scene(resolution=16), S.plane_scene(resolution=(16, 8)), S.backlit_scene(resolution=(16, 8)),
                  S.furnace_scene(resolution=(8, 4))):
-        img = _render(mat, spec, 8, tmp_path)
+        img = render(mat, spec, 8, tmp_path)
         assert np.isfinite(img).all() and (img >= 0).all(), f"{case} {form} {spec.name}"
 
 

@@ -15,7 +15,6 @@ from addon.operators import material_ops  # noqa: E402
 
 pytestmark = pytest.mark.blender
 OP = material_ops.LAMINA_OT_add_thin_coat
-needs_mapping = pytest.mark.skipif(model.ID not in MAPPINGS, reason="the thin coat's Cycles mapping is not registered")
 
 
 @pytest.fixture(autouse=True)
@@ -126,7 +125,6 @@ def test_kappa_is_shown_the_way_artists_read_it():
 # ------------------------------------------------------------------------------------ with the mapping
 
 
-@needs_mapping
 def test_the_dialog_adds_a_material_and_undo_removes_it(registered, sphere):
     mine = bpy.data.materials.new("My paint")
     sphere.data.materials.append(mine)
@@ -145,7 +143,6 @@ def test_the_dialog_adds_a_material_and_undo_removes_it(registered, sphere):
     assert "Thin Coat Varnished metal" in bpy.data.materials
 
 
-@needs_mapping
 def test_custom_coat_in_the_osl_form(registered, sphere):
     assert bpy.ops.lamina.add_thin_coat(base_type="slab", roughness_top=0.2, bounces=0, form="osl") == {"FINISHED"}
     mat = sphere.active_material
@@ -181,7 +178,6 @@ def _panel_text(context_material) -> str:
     return _text(log)
 
 
-@needs_mapping
 def test_the_panel_summarises_the_coat_and_names_texture_driven_inputs(registered, sphere):
     assert bpy.ops.lamina.add_thin_coat(preset="glazed_ceramic") == {"FINISHED"}
     mat = sphere.active_material

@@ -19,13 +19,6 @@ def lamina(*args):
                           env=dict(os.environ, PYTHONPATH=ROOT), timeout=300)
 
 
-def _mapping_ready() -> bool:
-    from addon.nodes import MAPPINGS
-
-    return model.ID in MAPPINGS
-
-
-needs_mapping = pytest.mark.skipif(not _mapping_ready(), reason="the thin coat's Cycles mapping is not registered")
 
 
 def test_list_presets_prints_the_six_with_their_descriptions():
@@ -37,7 +30,6 @@ def test_list_presets_prints_the_six_with_their_descriptions():
     assert len(column) == 1  # descriptions start in one column, the longest name included
 
 
-@needs_mapping
 @pytest.mark.parametrize("form", ["nodes", "osl"])
 def test_make_material_from_a_preset(tmp_path, form):
     out = tmp_path / "lacquer.blend"
@@ -46,7 +38,6 @@ def test_make_material_from_a_preset(tmp_path, form):
     assert out.read_bytes()[:7] == b"BLENDER" and [p.name for p in tmp_path.iterdir()] == ["lacquer.blend"]
 
 
-@needs_mapping
 def test_make_material_from_a_json_dict_with_roughness_and_a_clamp_warning(tmp_path):
     d = {"roughness_top": 0.1, "kappa_bottom": 500, "eta": 1.5, "sigma_a": [0.1, 0.2, 0.4], "depth": 0.5,
          "bounces": 9, "base": {"type": "conductor"}}
