@@ -14,12 +14,14 @@ DATA ?= $(HOME)/.cache/lamina/spongecake-ms
 venv: $(VENV)/.stamp
 
 $(VENV)/.stamp: requirements.txt
+	@echo "lamina: installing the pinned Blender 5.0 environment into $(VENV) (bpy, numpy, OpenEXR, torch CPU, pytest; about 1.8 GB, a few minutes, once)"
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -r requirements.txt
 	touch $@
 
 $(VENV42)/.stamp: requirements-blender-4.2.txt
+	@echo "lamina: installing Blender 4.2 LTS (bpy 4.2) into $(VENV42) for the API check of make test (about 1 GB, once)"
 	$(PYTHON) -m venv $(VENV42)
 	$(PY42) -m pip install --quiet -r requirements-blender-4.2.txt
 	touch $@
@@ -35,7 +37,7 @@ test-all: venv
 	$(PY) -m pytest -q
 
 demo: venv
-	$(PY) -m addon.cli demo --out $(OUT) --resolution 64 --samples 64
+	$(PY) -m addon.cli demo --out $(OUT) --overwrite --resolution 64 --samples 64
 
 bench: venv
 	$(PY) -m addon.cli bench --out docs --resolution 48 --samples 32

@@ -7,9 +7,9 @@ is imported by ``register()`` only.
 
 
 def _blender_modules():
-    from . import operators, ui
+    from . import cli, operators, ui
 
-    return (operators, ui)
+    return (operators, ui, cli)
 
 
 def register():

@@ -123,7 +123,7 @@ def render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
     def materials(name):
         p = model.params_from_dict(presets.load(MODEL, name))
         return {**{form: lamina_material.new_material(MODEL, p, form) for form in ("nodes", "osl")},
-                "principled": principled_like(p)}
+                "principled": lamina_material.principled_material(MODEL, p)}
 
     return fastest_renders(presets.names(MODEL), materials, samples, resolution, repeats)
 
@@ -149,25 +149,6 @@ def fastest_renders(names, materials_of, samples: int, resolution: int, repeats:
             blend_io.remove_new_data(before)
         rows.append({"preset": name, **times})
     return rows
-
-
-def principled_like(p):
-    """A Principled BSDF with about as many lobes as the stack: specular + coat per extra layer, sheen for
-    fibers, transmission when the stack transmits."""
-    import bpy
-
-    mat = bpy.data.materials.new("Lamina bench principled")
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
-    bsdf = mat.node_tree.nodes["Principled BSDF"]
-    bsdf.inputs["Roughness"].default_value = 0.5
-    if len(p.layers) > 1:
-        bsdf.inputs["Coat Weight"].default_value = 1.0
-    if any(layer.type == "fiber" for layer in p.layers):
-        bsdf.inputs["Sheen Weight"].default_value = 1.0
-    if p.substrate is None:
-        bsdf.inputs["Transmission Weight"].default_value = 0.5
-    return mat
 
 
 # ------------------------------------------------------------------------------------------------ docs
@@ -684,11 +665,12 @@ def overview_picture(path: str, samples: int, resolution: int) -> None:
     import tempfile
 
     from .bake.exr import read_png, write_png
-    from .operators import compare_run
+    from .demo_page import OVERVIEW
+    from .operators import demo
 
     with tempfile.TemporaryDirectory(prefix="lamina_bench_") as tmp:
-        compare_run.demo(["osl"], ["sphere"], samples, resolution, 0, tmp)
-        write_png(path, read_png(os.path.join(tmp, "overview.png")))
+        demo.run([MODEL], ["osl"], ["sphere"], samples, resolution, 0, tmp, all_presets=True)
+        write_png(path, read_png(os.path.join(tmp, OVERVIEW)))
 
 
 def run(out_dir: str, samples: int = 64, resolution: int = 64, ms: MsSizes | None = MS_DEFAULT) -> None:

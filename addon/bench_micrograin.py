@@ -210,32 +210,22 @@ def render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
 
     def materials(name):
         data = {**presets.load(MODEL, name), "bulk": {"type": model.WRAPPED}}
-        out = {"principled": _principled()}
+        out = {"principled": lamina_material.principled_material(MODEL, model.params_from_dict(data))}
         for form in ("nodes", "osl"):
             for gaf in model.GAF_TYPES:
-                out[f"{form} {gaf}"] = lamina_material.new_material(
-                    MODEL, model.params_from_dict({**data, "gaf": gaf}), form)
-                _plug_principled(out[f"{form} {gaf}"])
+                p = model.params_from_dict({**data, "gaf": gaf})
+                out[f"{form} {gaf}"] = lamina_material.new_material(MODEL, p, form)
+                _plug_principled(out[f"{form} {gaf}"], p)
         return out
 
     return fastest_renders(presets.names(MODEL), materials, samples, resolution, repeats)
 
 
-def _principled():
-    import bpy
-
-    mat = bpy.data.materials.new("Lamina bench principled")
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
-    mat.node_tree.nodes["Principled BSDF"].inputs["Roughness"].default_value = 0.4
-    return mat
-
-
-def _plug_principled(mat) -> None:
+def _plug_principled(mat, p) -> None:
+    """Feed the layer's Bulk input with the Principled BSDF it is timed against (``mapping.principled_settings``)."""
     from .nodes import material as lamina_material
 
-    bsdf = mat.node_tree.nodes.new("ShaderNodeBsdfPrincipled")
-    bsdf.inputs["Roughness"].default_value = 0.4
+    bsdf = lamina_material.principled_node(mat.node_tree, mapping.principled_settings(p))
     mat.node_tree.links.new(bsdf.outputs[0], lamina_material.shader_node(mat).inputs["Bulk"])
 
 

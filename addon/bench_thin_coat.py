@@ -278,14 +278,13 @@ def render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
 
 def preset_render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
     """Cycles render time of each preset as node group, OSL and a Principled BSDF coat of the same roughness and
-    IOR (``compare_run.principled_coat``, what an artist would otherwise use)."""
+    IOR (``nodes.principled_coat``, what an artist would otherwise use)."""
     from .nodes import material as lamina_material
-    from .operators.compare_run import principled_coat
 
     def materials(name):
         p = model.params_from_dict(presets.load(MODEL, name))
         return {**{form: lamina_material.new_material(MODEL, p, form) for form in ("nodes", "osl")},
-                "principled": principled_coat(p)}
+                "principled": lamina_material.principled_material(MODEL, p)}
 
     return fastest_renders(presets.names(MODEL), materials, samples, resolution, repeats)
 

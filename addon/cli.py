@@ -8,9 +8,10 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import sys
 
-from . import presets
+from . import paths, presets
 from .models import MODELS
 from .models.params import ParamError
 from .nodes import FORMS
@@ -23,8 +24,20 @@ class CliError(Exception):
     """A refusal with a one-line reason (exit code 2)."""
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse with a one-line refusal (``lamina: error: ...``, exit 2) instead of usage text and a reason, and
+    no abbreviations (``--form`` is not ``--forms``)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, allow_abbrev=False, **kwargs)
+
+    def error(self, message):
+        command = self.prog.split(" ", 1)[1] if " " in self.prog else ""
+        raise CliError(f"{command}: {message}" if command else message)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="lamina", description="Lamina layered materials for Cycles")
+    ap = Parser(prog="lamina", description="Lamina layered materials for Cycles")
     sub = ap.add_subparsers(dest="command", required=True)
 
     lp = sub.add_parser("list-presets", help="list the presets of a model")
@@ -32,13 +45,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     mm = sub.add_parser("make-material", help="write a .blend with a Lamina material on a sphere")
     _material_args(mm)
+    mm.add_argument("--form", default="nodes", choices=FORMS)
     mm.add_argument("--out", required=True, help="the .blend to write (refused if it exists, see --overwrite)")
     mm.add_argument("--overwrite", action="store_true", help="replace an existing file")
 
     cp = sub.add_parser("compare", help="render Cycles vs the Python reference; write images and report.json")
     _material_args(cp)
     _compare_args(cp)
-    cp.add_argument("--out", required=True, help="output folder (created)")
+    cp.add_argument("--out", required=True, help="the results folder (created; refused if it has files, see "
+                                                 "--overwrite)")
+    cp.add_argument("--overwrite", action="store_true", help="replace the results in an existing --out")
     cp.add_argument("--ms", action="store_true",
                     help="multiple scattering: compare SS only, SS + MS (network) and SS + MS (Monte Carlo)")
     cp.add_argument("--ms-paths", type=int, default=2000,
@@ -59,10 +75,14 @@ def build_parser() -> argparse.ArgumentParser:
     cp.add_argument("--truth-stride", type=int, default=4,
                     help="with --truth: Monte Carlo at every n-th row and column (errors use those pixels)")
 
-    dm = sub.add_parser("demo", help="compare every preset and write index.html")
-    dm.add_argument("--model", default="spongecake", choices=sorted(MODELS))
+    dm = sub.add_parser("demo", help="compare the presets of every model and write index.html")
+    dm.add_argument("--model", choices=list(MODELS), help="only this model (default: every model)")
+    dm.add_argument("--all-presets", action="store_true",
+                    help="every preset of each model (default: a representative set)")
     _compare_args(dm)
-    dm.add_argument("--out", default="out")
+    dm.add_argument("--out", default="out", help="the results folder (created; refused if it has files, see "
+                                                 "--overwrite)")
+    dm.add_argument("--overwrite", action="store_true", help="replace the results in an existing --out")
 
     bn = sub.add_parser("bench", help="benchmarks and accuracy tables (docs/benchmarks.md, docs/accuracy.md)")
     bn.add_argument("--out", default="docs")
@@ -102,8 +122,7 @@ def _material_args(p) -> None:
     p.add_argument("--model", default="spongecake", choices=sorted(MODELS))
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--preset", help="a preset name (see list-presets)")
-    g.add_argument("--params", "--json", dest="params", help="a JSON file with the model's parameter dict")
-    p.add_argument("--form", default="nodes", choices=FORMS)
+    g.add_argument("--json", "--params", dest="params", help="a JSON file with the model's parameter dict")
 
 
 def _compare_args(p) -> None:
@@ -116,22 +135,30 @@ def _compare_args(p) -> None:
 
 
 def load_params(args):
-    data = _read_dict(args.model, args.preset, args.params, "--params/--json")
+    data = _read_dict(args.model, args.preset, args.params, "--json")
     return _validated(MODELS[args.model], data).params
 
 
 def _read_dict(model_id: str, preset: str | None, path: str | None, option: str):
     """A model dict from a JSON file (``option`` names it in messages) or, without one, from a preset."""
-    if path:
+    if path is not None:
         try:
-            with open(path) as f:
+            with open(_checked(paths.input_file, option, path)) as f:
                 return json.load(f)
-        except (OSError, json.JSONDecodeError) as e:
-            raise CliError(f"cannot read {option} {path}: {e}") from None
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+            raise CliError(f"{option} {path!r}: not a JSON file ({e})") from None
     try:
         return presets.load(model_id, preset)
     except KeyError as e:
-        raise CliError(str(e.args[0])) from None
+        raise CliError(f"--preset: {e.args[0]}") from None
+
+
+def _checked(check, option: str, value, *extra):
+    """``check(option, value, *extra)`` from ``paths``, its refusal as a CliError."""
+    try:
+        return check(option, value, *extra)
+    except paths.PathError as e:
+        raise CliError(str(e)) from None
 
 
 def _validated(model, data: dict):
@@ -150,20 +177,45 @@ def _warn(warnings, already=()) -> None:
             print(f"lamina: warning: {w}", file=sys.stderr)
 
 
-def _split(value: str, allowed, what: str) -> list[str]:
+def _split(option: str, value: str, allowed, what: str) -> list[str]:
     items = [v.strip() for v in value.split(",") if v.strip()]
     bad = [v for v in items if v not in allowed]
     if bad or not items:
-        raise CliError(f"unknown {what} {', '.join(bad) or '(none)'}; expected some of {', '.join(allowed)}")
+        raise CliError(f"{option} {value!r}: unknown {what} {', '.join(bad) or '(none)'}; expected some of "
+                       f"{', '.join(allowed)}")
     return items
+
+
+def _at_least(args, **least) -> None:
+    """Refuse the first option below its least value (``--name must be ≥ N, got M``)."""
+    for name, lowest in least.items():
+        value = getattr(args, name)
+        if value < lowest:
+            raise CliError(f"--{name.replace('_', '-')} must be ≥ {lowest}, got {value}")
 
 
 def _check_compare_args(args) -> tuple[list[str], list[str] | None]:
     """The forms and the scenes (None: the material's default scenes, ``compare_run.default_scene_names``)."""
-    if args.samples < 1 or args.resolution < 8:
-        raise CliError("--samples must be ≥ 1 and --resolution ≥ 8")
-    scenes = None if args.scenes is None else _split(args.scenes, SCENES, "scene")
-    return _split(args.forms, FORMS, "form"), scenes
+    _at_least(args, samples=1, resolution=8, seed=0)
+    scenes = None if args.scenes is None else _split("--scenes", args.scenes, SCENES, "scene")
+    return _split("--forms", args.forms, FORMS, "form"), scenes
+
+
+class WorkFailed(Exception):
+    """The work failed after every argument was accepted (exit code 1); the message is one line."""
+
+
+def _in_results_folder(out: str, work):
+    """Run ``work(folder)`` in a staging folder that becomes ``out`` when it succeeds (``paths.staged_folder``);
+    a failure leaves ``out`` as it was and is reported with ``out``'s name, not the staging folder's."""
+    stage = None
+    try:
+        with paths.staged_folder(out) as stage:
+            return work(stage)
+    except (CliError, KeyboardInterrupt):
+        raise
+    except Exception as e:  # noqa: BLE001 - reported as one line, exit code 1
+        raise WorkFailed(paths.unstaged(one_line(e), stage, out) if stage else one_line(e)) from None
 
 
 # -------------------------------------------------------------------------------------------- commands
@@ -179,9 +231,7 @@ def cmd_list_presets(args) -> int:
 
 def cmd_make_material(args) -> int:
     p = load_params(args)
-    out = os.path.abspath(args.out)
-    if os.path.exists(out) and not args.overwrite:
-        raise CliError(f"{out} exists; pass --overwrite to replace it")
+    out = _checked(paths.output_file, "--out", args.out, args.overwrite)
     from .operators import blend_io
 
     name = args.preset or os.path.splitext(os.path.basename(args.params))[0]
@@ -204,10 +254,12 @@ def cmd_compare(args) -> int:
     if args.principled and not compare_run.has_principled(args.model):
         raise CliError(f"--principled: model {args.model} has no Principled BSDF counterpart (thin_coat has)")
     truth = _truth_settings(args) if args.truth else None
-    report = compare_run.compare_params(args.model, p, forms, scenes, args.samples, args.resolution, args.seed,
-                                        os.path.abspath(args.out), label=args.preset or "custom", ms=ms,
-                                        blends=args.blends, principled=args.principled, truth=truth)
+    out = _checked(paths.output_folder, "--out", args.out, args.overwrite)
+    report = _in_results_folder(out, lambda folder: compare_run.compare_params(
+        args.model, p, forms, scenes, args.samples, args.resolution, args.seed, folder,
+        label=args.preset or "custom", ms=ms, blends=args.blends, principled=args.principled, truth=truth))
     print(compare_run.summary_lines(report))
+    print(f"lamina: wrote {out}")
     return 0
 
 
@@ -229,8 +281,7 @@ def _ms_settings(args, p):
     from .ms_truth import TruthSettings
 
     least = 2 * TruthSettings.batches  # at least 2 paths per batch
-    if min(args.ms_paths, args.ms_albedo_paths) < least or args.ms_stride < 1:
-        raise CliError(f"--ms-paths and --ms-albedo-paths must be ≥ {least} and --ms-stride ≥ 1")
+    _at_least(args, ms_paths=least, ms_albedo_paths=least, ms_stride=1)
     from .operators import compare_run
 
     if not compare_run.has_multiple_scattering(args.model):
@@ -245,44 +296,55 @@ def _ms_settings(args, p):
 
 def cmd_demo(args) -> int:
     forms, scenes = _check_compare_args(args)
-    from .operators import compare_run
+    out = _checked(paths.output_folder, "--out", args.out, args.overwrite)
+    from .operators import demo
 
-    compare_run.demo(forms, scenes, args.samples, args.resolution, args.seed, os.path.abspath(args.out), args.model)
-    print(f"lamina: open {os.path.join(os.path.abspath(args.out), 'index.html')}")
+    models = [args.model] if args.model else list(MODELS)
+    _in_results_folder(out, lambda folder: demo.run(models, forms, scenes, args.samples, args.resolution, args.seed,
+                                                    folder, all_presets=args.all_presets))
+    print(f"lamina: open {os.path.join(out, 'index.html')}")
     return 0
 
 
 def cmd_bench(args) -> int:
     from . import bench
 
+    out = _checked(paths.output_folder, "--out", args.out, True)  # the benchmark pages are rewritten in place
+    _at_least(args, samples=1, resolution=8)
     ms = None
     if not args.no_ms:
         from .ms_truth import TruthSettings
 
         least = 2 * TruthSettings.batches  # at least 2 paths per batch
-        if min(args.ms_paths, args.ms_failure_paths) < least or min(
-                args.ms_stride, args.ms_furnace_configs, args.ms_repeats, args.ms_bake_size) < 1:
-            raise CliError(f"--ms-paths and --ms-failure-paths must be ≥ {least}, the other --ms-* options ≥ 1")
+        _at_least(args, ms_paths=least, ms_failure_paths=least, ms_stride=1, ms_furnace_configs=1, ms_repeats=1,
+                  ms_bake_size=1)
         ms = bench.MsSizes(truth=TruthSettings(paths=args.ms_paths, albedo_paths=args.ms_paths, stride=args.ms_stride,
                                                seed=bench.MS_DEFAULT.seed),
                            furnace_configs=args.ms_furnace_configs, failure_paths=args.ms_failure_paths,
                            speed_repeats=args.ms_repeats, bake_size=args.ms_bake_size)
-    bench.run(os.path.abspath(args.out), samples=args.samples, resolution=args.resolution, ms=ms)
+    os.makedirs(out, exist_ok=True)
+    bench.run(out, samples=args.samples, resolution=args.resolution, ms=ms)
     return 0
 
+
+def _blend_paths(args) -> tuple[str, str]:
+    """--blend and where to write (--out, or --blend itself with --overwrite), checked before any work."""
+    blend = _checked(paths.input_blend, "--blend", args.blend)
+    if args.out is None and not args.overwrite:
+        raise CliError("pass --out FILE, or --overwrite to save over --blend")
+    if args.out is None:
+        return blend, _checked(paths.output_file, "--blend", args.blend, True)
+    return blend, _checked(paths.output_file, "--out", args.out, args.overwrite)
 
 
 def cmd_bake(args) -> int:
     blend, out = _blend_paths(args)
-    from .operators import bake_ops
+    from .operators import bake_ops, blend_io
 
     try:
         summary, warnings = bake_ops.bake_file(blend, args.material, out)
-    except bake_ops.MaterialError as e:
+    except (blend_io.BlendArgumentError, bake_ops.MaterialError) as e:
         raise CliError(str(e)) from None
-    except bake_ops.BakeError as e:  # the textures: nothing was written
-        print(f"lamina: error: {e}", file=sys.stderr)
-        return 1
     _warn(warnings)
     print(f"lamina: {summary}; wrote {out}")
     return 0
@@ -295,63 +357,88 @@ def _porous_dict(args) -> tuple[dict, list[str]]:
 
     data = _read_dict(micrograin.ID, args.preset, args.json, "--json")
     if not isinstance(data, dict):
-        raise CliError(f"--json {args.json}: expected a JSON object (a micrograin dict)")
+        raise CliError(f"--json {args.json!r}: expected a JSON object (a micrograin dict)")
     data = {k: v for k, v in data.items() if k != "bulk"}  # the bulk is the material's own shader
     return data, _validated(micrograin, {**data, "bulk": {"type": micrograin.WRAPPED}}).warnings
 
 
-def _blend_paths(args) -> tuple[str, str]:
-    """--blend and where to write (--out, or --blend itself with --overwrite), checked before any work."""
-    blend = os.path.abspath(args.blend)
-    if not os.path.isfile(blend):
-        raise CliError(f"{blend} does not exist")
-    if args.out is None and not args.overwrite:
-        raise CliError("pass --out FILE, or --overwrite to save over --blend")
-    out = os.path.abspath(args.out or args.blend)
-    if os.path.exists(out) and not args.overwrite:
-        raise CliError(f"{out} exists; pass --overwrite to replace it")
-    return blend, out
-
-
 def cmd_add_porous(args) -> int:
-    blend, out = _blend_paths(args)
     data, printed = _porous_dict(args)
-    from .operators import material_ops
+    blend, out = _blend_paths(args)
+    from .operators import blend_io, material_ops
 
     try:
         summary, warnings = material_ops.add_porous_file(blend, args.material, data, args.form, out, args.preset)
-    except material_ops.PorousError as e:  # the file's content: nothing was written
-        print(f"lamina: error: {e}", file=sys.stderr)
-        return 1
+    except (blend_io.BlendArgumentError, material_ops.PorousError) as e:  # nothing was written
+        raise CliError(str(e)) from None
     _warn(warnings, already=printed)
     print(f"lamina: {summary}; wrote {out}")
     return 0
 
 
 COMMANDS = {"list-presets": cmd_list_presets, "make-material": cmd_make_material, "compare": cmd_compare,
-            "demo": cmd_demo, "bench": cmd_bench,
-            "bake": cmd_bake, "add-porous": cmd_add_porous}
+            "demo": cmd_demo, "bench": cmd_bench, "bake": cmd_bake, "add-porous": cmd_add_porous}
+
+# Lamina's temporary names (``bake.exr.atomic_path``'s ".<name>.<random>.tmp.<ext>", ``paths.staged_folder``'s
+# ".<name>.<random>.lamina-tmp"): a message shows the final name instead.
+_TEMPORARY = re.compile(r"\.([^/\s'\"]+?)\.[A-Za-z0-9_]{8}\.(?:tmp(?:\.[A-Za-z0-9]+)?|lamina-tmp)")
+
+
+def one_line(e: BaseException) -> str:
+    """An exception as one line for a user: the OS's reason and the file, or the message's last line, with
+    Lamina's temporary names replaced by the final ones and Blender's "Error: " prefix dropped."""
+    if isinstance(e, OSError) and e.strerror:
+        text = f"{e.strerror}: {e.filename}" if e.filename else e.strerror
+    else:
+        lines = [line.strip() for line in str(e).strip().splitlines() if line.strip()]
+        text = lines[-1] if lines else type(e).__name__
+    text = _TEMPORARY.sub(r"\1", text)
+    return text[len("Error: "):] if text.startswith("Error: ") else text
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
+    command = "lamina"
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as e:  # argparse already printed its one-line reason
-        return int(e.code or 0)
-    try:
+        args = build_parser().parse_args(argv)
+        command = args.command
         return COMMANDS[args.command](args)
     except CliError as e:
         print(f"lamina: error: {e}", file=sys.stderr)
         return 2
+    except SystemExit as e:  # --help printed its text
+        return int(e.code or 0)
+    except WorkFailed as e:
+        print(f"lamina: error: {command} failed: {e}", file=sys.stderr)
+        return 1
     except Exception as e:  # noqa: BLE001 - a headless run must end with one line and a status, not a trace
-        print(f"lamina: error: {type(e).__name__}: {e}", file=sys.stderr)
+        print(f"lamina: error: {command} failed: {one_line(e)}", file=sys.stderr)
         return 1
 
 
 def blender_command(argv) -> int:
     """The handler given to ``bpy.utils.register_cli_command`` (``blender -b -c lamina ...``)."""
     return main(list(argv))
+
+
+_handle = None
+
+
+def register():
+    """``blender -c lamina ...`` (Blender 4.2+; the bpy module has no ``-c``: ``python -m addon.cli``)."""
+    global _handle
+    import bpy
+
+    if hasattr(bpy.utils, "register_cli_command"):
+        _handle = bpy.utils.register_cli_command("lamina", blender_command)
+
+
+def unregister():
+    global _handle
+    if _handle is not None:
+        import bpy
+
+        bpy.utils.unregister_cli_command(_handle)
+        _handle = None
 
 
 if __name__ == "__main__":

@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass
 
 from . import spongecake
-from .params import Param, ParamError, Validated, read_fields
+from .params import METADATA_KEYS, Param, ParamError, Validated, read_fields
 
 ID = "micrograin"
 LABEL = "Micrograin"
@@ -106,6 +106,12 @@ class Params:
         """The equivalent GGX roughness α̃ (Eq. 18)."""
         return equivalent_roughness(self.filling_factor, self.anfractuosity)
 
+    @property
+    def transmits(self) -> bool:
+        """Whether light passes through: the grains are opaque, so through the bulk only, where the bulk does (a
+        dielectric, another model that transmits; a material's own shader is unknown: assumed to)."""
+        return bulk_transmits(self.bulk)
+
     def to_dict(self) -> dict:
         return {
             "filling_factor": self.filling_factor,
@@ -128,6 +134,13 @@ def _bulk_dict(bulk: Bulk) -> dict:
         return {"type": bulk.type, **{p.name: _plain(getattr(bulk.params, p.name))
                                       for p in spongecake.SUBSTRATE[bulk.type]}}
     return {"type": bulk.type, **bulk.params.to_dict()}
+
+
+def bulk_transmits(bulk: Bulk) -> bool:
+    """Whether light passes through the bulk (``Params.transmits``)."""
+    if bulk.type in SIMPLE_BULKS:
+        return bulk.type not in spongecake.OPAQUE_SUBSTRATES
+    return bulk.type == WRAPPED or bulk.params.transmits
 
 
 def log_porosity(tau0: float) -> float:
@@ -156,7 +169,7 @@ def validate(data: dict) -> Validated:
     """Clean a Micrograin dict: clamp out-of-range numbers (with messages), refuse what cannot be clamped."""
     if not isinstance(data, dict):
         raise ParamError(f"micrograin: expected a dict, got {type(data).__name__}")
-    known = {p.name for p in LAYER + STACK} | {"roughness", "grain", "bulk", "name", "description"}
+    known = {p.name for p in LAYER + STACK} | {"roughness", "grain", "bulk", *METADATA_KEYS}
     unknown = sorted(set(data) - known)
     if unknown:
         raise ParamError(f"micrograin: unknown key(s) {', '.join(unknown)}")

@@ -10,6 +10,11 @@ import math
 from dataclasses import dataclass, field
 
 
+# Keys of a preset or parameter dict that describe it rather than the material: validation accepts and ignores them
+# (``name``; ``description``, shown with a preset; ``demo``: the preset is in the demo's default selection).
+METADATA_KEYS = ("name", "description", "demo")
+
+
 class ParamError(ValueError):
     """A parameter value that cannot be clamped into something meaningful (wrong type, unknown name)."""
 
@@ -48,18 +53,20 @@ class Param:
         values = _as_triple(value, where, self.name)
         if self.kind == "vector":
             return _normalized(values, self.default, where, self.name, warnings)
-        return tuple(self._clamp_scalar(v, where, warnings) for v in values)
+        return tuple(self._clamp_scalar(v, where, warnings, channel=i) for i, v in enumerate(values))
 
-    def _clamp_scalar(self, v: float, where: str, warnings: list[str]) -> float:
+    def _clamp_scalar(self, v: float, where: str, warnings: list[str], channel: int | None = None) -> float:
+        """``v`` clamped into [min, max]; a non-finite value takes the default (of its channel for colours)."""
+        name = self.name if channel is None else f"{self.name}[{channel}]"
         if not math.isfinite(v):
-            warnings.append(f"{where}{self.name}: {v} is not finite, using the default {self.default}")
-            d = self.default
-            return float(d if self.kind == "float" else d[0])
+            d = float(self.default if channel is None else self.default[channel])
+            warnings.append(f"{where}{name}: {v} is not finite, using the default {d:g}")
+            return d
         lo = -math.inf if self.min is None else self.min
         hi = math.inf if self.max is None else self.max
         c = min(max(v, lo), hi)
         if c != v:
-            warnings.append(f"{where}{self.name}: {v:g} is outside [{lo:g}, {hi:g}], clamped to {c:g}")
+            warnings.append(f"{where}{name}: {v:g} is outside [{lo:g}, {hi:g}], clamped to {c:g}")
         return c
 
 

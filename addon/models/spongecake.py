@@ -7,15 +7,20 @@ and orientation ω_p (flake normal for ``surface``, fiber tangent for ``fiber``;
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
-from .params import Param, ParamError, Validated, read_fields
+from .params import METADATA_KEYS, Param, ParamError, Validated, read_fields
 
 ID = "spongecake"
 LABEL = "SpongeCake"
 MAX_LAYERS = 4
 LAYER_TYPES = ("surface", "fiber", "hg")
 SUBSTRATE_TYPES = ("none", "diffuse", "conductor", "dielectric")
+
+# Optical thickness (Tρ summed over the stack) beyond which no light crosses it: e^-30 ≈ 1e-13 along the normal,
+# and flakes along the normal or fibers in the tangent plane are at least as thick along every other direction.
+OPAQUE_THICKNESS = 30.0
+OPAQUE_SUBSTRATES = ("diffuse", "conductor")  # a dielectric substrate refracts light through the stack
 
 # Flake roughness below this makes the SGGX matrix singular in float32; HG |g| above this is a delta.
 MIN_FLAKE_ROUGHNESS = 1e-4
@@ -97,6 +102,13 @@ class Params:
     delta_transmission: bool = False
     multiple_scattering: bool = False
 
+    @property
+    def transmits(self) -> bool:
+        """Whether light passes through the stack: no opaque substrate, and layers thinner than
+        ``OPAQUE_THICKNESS`` in all."""
+        opaque = self.substrate is not None and self.substrate.type in OPAQUE_SUBSTRATES
+        return not opaque and sum(layer.thickness for layer in self.layers) < OPAQUE_THICKNESS
+
     def to_dict(self) -> dict:
         return {
             "layers": [asdict(layer) for layer in self.layers],
@@ -115,7 +127,7 @@ def validate(data: dict) -> Validated:
     if not isinstance(data, dict):
         raise ParamError(f"spongecake: expected a dict, got {type(data).__name__}")
     stack_keys = tuple(p.name for p in STACK)
-    unknown = sorted(set(data) - {"layers", "substrate", "name", "description", *stack_keys})
+    unknown = sorted(set(data) - {"layers", "substrate", *METADATA_KEYS, *stack_keys})
     if unknown:
         raise ParamError(f"spongecake: unknown key(s) {', '.join(unknown)}")
     layers_in = data.get("layers") or []
@@ -140,14 +152,15 @@ def _read_layer(d: dict, index: int, warnings: list[str]) -> Layer:
     where = f"layer {index + 1}: "
     if not isinstance(d, dict):
         raise ParamError(f"{where}expected a dict, got {d!r}")
-    fields = read_fields(LAYER, d, where, warnings)
-    lo, hi = (MIN_FLAKE_ROUGHNESS, 1.0) if fields["type"] != "hg" else (-MAX_ABS_G, MAX_ABS_G)
-    r = fields["roughness"]
-    if not lo <= r <= hi:
-        fields["roughness"] = min(max(r, lo), hi)
-        warnings.append(f"{where}roughness: {r:g} is outside [{lo:g}, {hi:g}] for {fields['type']} layers, "
-                        f"clamped to {fields['roughness']:g}")
-    return Layer(**fields)
+    kind = LAYER[0].clamp(d.get("type", LAYER[0].default), where, warnings)
+    return Layer(**read_fields(layer_declaration(kind), d, where, warnings))
+
+
+def layer_declaration(kind: str) -> tuple:
+    """``LAYER`` with the roughness range of a layer of type ``kind`` (flakes and fibers: α in [1e-4, 1];
+    media: the mean cosine g in [-0.999, 0.999])."""
+    lo, hi = (-MAX_ABS_G, MAX_ABS_G) if kind == "hg" else (MIN_FLAKE_ROUGHNESS, 1.0)
+    return tuple(replace(p, min=lo, max=hi) if p.name == "roughness" else p for p in LAYER)
 
 
 def _read_substrate(d, warnings: list[str]) -> Substrate | None:

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .params import Param, ParamError, Validated, read_fields
+from .params import METADATA_KEYS, Param, ParamError, Validated, read_fields
 
 ID = "thin_coat"
 LABEL = "Thin Coat"
@@ -142,7 +142,7 @@ def validate(data: dict) -> Validated:
     if not isinstance(data, dict):
         raise ParamError(f"thin_coat: expected a dict, got {type(data).__name__}")
     names = {p.name for p in LAYER + STACK} | {p.name for p in ROUGHNESS.values()}
-    unknown = sorted(set(data) - names - {"base", "name", "description"})
+    unknown = sorted(set(data) - names - {"base", *METADATA_KEYS})
     if unknown:
         raise ParamError(f"thin_coat: unknown key(s) {', '.join(unknown)}")
     warnings: list[str] = []

@@ -5,6 +5,18 @@ from . import bulk, micrograin, spongecake, thin_coat
 # Model id -> mapping; "bulk" is the simple BSDFs that reference bulks under a porous layer are made of.
 MAPPINGS = {"spongecake": spongecake, "micrograin": micrograin, "thin_coat": thin_coat, bulk.ID: bulk}
 FORMS = ("nodes", "osl")  # node group (every device) and OSL script (CPU, OptiX)
+FORM_LABELS = {"nodes": "node group", "osl": "OSL"}
+
+
+def approximations(model_id: str, p) -> list[tuple[str, str]]:
+    """(name, what it does) of each approximation the mapping makes for ``p`` (``approximations_used``), then those
+    of the mapping of what it wraps (a porous layer's bulk of another model), named "<model>: <name>"."""
+    mapping = MAPPINGS[model_id]
+    out = [(name, mapping.APPROXIMATIONS[name][0]) for name in mapping.approximations_used(p)]
+    inner = mapping.bulk_shader(p) if hasattr(mapping, "bulk_shader") else None
+    if inner is not None and hasattr(MAPPINGS[inner[0]], "approximations_used"):
+        out += [(f"{inner[0]}: {name}", what) for name, what in approximations(*inner)]
+    return out
 
 
 def _backend(model_id: str, p, form: str, wo):

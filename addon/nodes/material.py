@@ -136,6 +136,24 @@ def new_material(model_id: str, p, form: str = "nodes", name: str | None = None)
     return mat
 
 
+def principled_material(model_id: str, p, name: str = "Lamina Principled") -> bpy.types.Material:
+    """A new material: a Principled BSDF set up by the model's mapping for ``p`` (``principled_settings``: the thin
+    coat's Principled coat, the others' Principled of about the same lobe count) into a Material Output."""
+    mat, tree, out = empty_material(name)
+    bsdf = principled_node(tree, MAPPINGS[model_id].principled_settings(p))
+    tree.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+    return mat
+
+
+def principled_node(tree, settings: dict):
+    """A new Principled BSDF node in ``tree`` with ``settings`` (socket name -> value) on its inputs."""
+    bsdf = tree.nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.location = (-300, 0)
+    for socket, value in settings.items():
+        bsdf.inputs[socket].default_value = _socket_value(value, bsdf.inputs[socket].default_value)
+    return bsdf
+
+
 def is_lamina(mat) -> bool:
     return mat is not None and "lamina" in mat.keys()
 

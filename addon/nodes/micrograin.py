@@ -57,6 +57,35 @@ APPROXIMATIONS = {
                                         bulk={"type": "diffuse", "albedo": [0.0, 0.0, 0.0]})),
 }
 
+
+def approximations_used(p: model.Params) -> list[str]:
+    """The names of the ``APPROXIMATIONS`` the mapping makes for ``p``, in that table's order (none without
+    grains; the bulk's own mapping has its own)."""
+    if p.filling_factor <= 0.0:
+        return []
+    used = {"view-only-weight"}
+    if p.transmits:
+        used.add("bulk-transmission-weight")
+    if p.grain.type != "diffuse":
+        used.add("grains-as-ggx")
+        if p.gaf == "series":
+            used.add("gaf-at-mirror")
+    if p.grain.type == "dielectric":
+        used.add("grain-transmittance-fit")
+    return [name for name in APPROXIMATIONS if name in used]
+
+
+# A Principled BSDF's roughness standing for grains over a bulk (the render-time baseline; the benchmark also
+# plugs it into the layer's Bulk input).
+PRINCIPLED_ROUGHNESS = 0.4
+
+
+def principled_settings(p: model.Params) -> dict:
+    """Principled BSDF inputs (by socket name) of about the porous layer's lobe count: one diffuse and one
+    specular lobe (the render-time baseline of the benchmarks and the demo)."""
+    return {"Roughness": PRINCIPLED_ROUGHNESS}
+
+
 GRAINS_PANEL = "Grains"
 BULK_PARAM = Param("bulk", "Bulk", "shader", None,
                    description="The material under the grains (any shader: Principled, a Lamina material, ...)")

@@ -96,6 +96,59 @@ APPROXIMATIONS = {
 }
 
 
+def approximations_used(p: model.Params) -> list[str]:
+    """The names of the ``APPROXIMATIONS`` the mapping makes for ``p``, in that table's order (an approximation
+    marked for Blender 4.2 is listed whenever its configuration occurs: it says so itself). The transmission
+    lobes' approximations only where light passes (``p.transmits``: the lobes of a thick stack carry nothing)."""
+    translucent = p.substrate is None and p.transmits
+    used = set()
+    for layer in p.layers:
+        along_normal = abs(layer.orientation[2])  # |cos| between the flake normal or fiber tangent and n
+        glossy = layer.type == "surface" or (layer.type == "fiber" and along_normal < 1.0)
+        lambert = layer.type == "hg" or (layer.type == "fiber" and along_normal > 0.0)
+        if glossy and layer.thickness < model.OPAQUE_THICKNESS:
+            used.add("mirror-G")
+        if layer.type == "surface" and along_normal < 1.0:
+            used.add("tilted-flakes")
+        if layer.type == "fiber" and 0.0 < along_normal < 1.0:
+            used.add("tilted-fiber")
+        if layer.type == "fiber" and along_normal > 0.0:
+            used.add("fiber-along-normal")
+        if layer.type == "fiber" and along_normal < 1.0 and translucent:
+            used.add("fiber-transmission-share")
+        if layer.type == "hg":
+            used.add("lambert-hg")
+        if lambert:
+            used |= {"diffusivity-exit", "scattering-share"}
+        if layer.has_fresnel:
+            used.add("schlick-at-view")
+    if translucent:
+        used |= {"translucent-lobe", "diffusivity-exit", "scattering-share"}
+    if p.substrate is not None:
+        used.add("substrate-attenuation")
+        if p.substrate.type == "conductor":
+            used.add("conductor-f0-blender-4.2")
+        if p.substrate.type == "dielectric":
+            used.add("dielectric-substrate-adjoint")
+    if len(p.layers) > 1:
+        used.add("mirror-attenuation")
+    return [name for name in APPROXIMATIONS if name in used]
+
+
+def principled_settings(p: model.Params) -> dict:
+    """Principled BSDF inputs (by socket name) with about as many lobes as the stack: specular + coat for more
+    than one layer, sheen for fibers, transmission when it transmits (the render-time baseline of the benchmarks
+    and the demo)."""
+    out = {"Roughness": 0.5}
+    if len(p.layers) > 1:
+        out["Coat Weight"] = 1.0
+    if any(layer.type == "fiber" for layer in p.layers):
+        out["Sheen Weight"] = 1.0
+    if p.transmits:
+        out["Transmission Weight"] = 0.5
+    return out
+
+
 @dataclass(frozen=True)
 class Socket:
     name: str  # node-group socket name; OSL parameter name is its identifier form

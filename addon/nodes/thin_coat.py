@@ -53,6 +53,7 @@ import numpy as np
 from ..models import thin_coat as model
 from ..reference import thin_coat as reference
 from ..reference.vmf import INVERSE_BELOW, SERIES_BELOW
+from . import principled_coat
 from .closures_np import rational_beckmann_lambda
 from .expr import MAX_MIX_WEIGHT
 from .micrograin import fresnel_dielectric
@@ -94,6 +95,28 @@ APPROXIMATIONS = {
                                    "(the same energy)",
                                    _config(kappa_top=100.0, kappa_bottom=100.0, bounces=1, base={"type": "slab"})),
 }
+
+
+def approximations_used(p: model.Params) -> list[str]:
+    """The names of the ``APPROXIMATIONS`` the mapping makes for ``p``, in that table's order (the Blender 4.2 one
+    is listed for every coat: it says so itself)."""
+    used = {"surface-as-beckmann", "lobe-fresnel-blender-4.2"}
+    if p.base.type == "diffuse":
+        if p.bounces >= 1:
+            used.add("diffuse-entry-mean")
+        if p.bounces >= 2:  # the orders past the first loop through the coat's hemispherical means
+            used.add("diffuse-means-fit")
+    elif p.bounces >= 1:
+        used |= {"endf-as-beckmann", "kappa-without-newton"}
+    if p.transmits:
+        used |= {"transmission-as-refraction", "kappa-without-newton"}
+    return [name for name in APPROXIMATIONS if name in used]
+
+
+def principled_settings(p: model.Params) -> dict:
+    """Blender's Principled BSDF coat set up from the same parameters (``principled_coat.settings``): what an
+    artist would otherwise use, rendered beside the coat in comparisons and the render-time baseline."""
+    return principled_coat.settings(p)
 
 
 # ------------------------------------------------------------------------------------------ sockets

@@ -1,4 +1,4 @@
-"""Blender operators, CLI registration and the window-manager settings they use."""
+"""Blender operators and the window-manager settings they use."""
 import bpy
 
 from . import bake_ops, compare_op, material_ops, ms_ops
@@ -15,11 +15,9 @@ classes = (
     bake_ops.LAMINA_OT_bake_textures,
 )
 
-_cli_handle = None
 
 
 def register():
-    global _cli_handle
     done = []
     try:
         for cls in classes:
@@ -31,17 +29,9 @@ def register():
         raise
     bpy.types.WindowManager.lamina_compare = bpy.props.PointerProperty(type=compare_op.LaminaCompareSettings)
     ms_ops.register()
-    if hasattr(bpy.utils, "register_cli_command"):
-        from .. import cli
-
-        _cli_handle = bpy.utils.register_cli_command("lamina", cli.blender_command)
 
 
 def unregister():
-    global _cli_handle
-    if _cli_handle is not None:
-        bpy.utils.unregister_cli_command(_cli_handle)
-        _cli_handle = None
     ms_ops.unregister()
     del bpy.types.WindowManager.lamina_compare
     for cls in reversed(classes):

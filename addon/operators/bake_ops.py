@@ -19,10 +19,10 @@ import tempfile
 import bpy
 
 from ..bake import textures
-from ..bake.exr import atomic_path
 from ..bake.textures import BakeError
 from ..nodes import material as lamina_material
 from ..nodes import texture_wiring
+from . import blend_io
 from .progress import end_modal
 
 
@@ -30,14 +30,25 @@ class MaterialError(BakeError):
     """The material itself cannot be baked: not a Lamina material, its Lamina node is gone, MS is off."""
 
 
-def check_material(mat) -> None:
+# How to fix a refused material, in the words of the interface in use (the panel, or the headless command).
+PANEL, CLI = "panel", "cli"
+FIXES = {
+    PANEL: {"no node": "add it again with Add SpongeCake Material",
+            "ms off": "turn it on in the Lamina panel first"},
+    CLI: {"no node": "write it again with lamina make-material",
+          "ms off": 'turn it on in Blender\'s Lamina panel, or write the material with lamina make-material from a '
+                    'dict with "multiple_scattering": true'},
+}
+
+
+def check_material(mat, interface: str = PANEL) -> None:
+    fix = FIXES[interface]
     if not lamina_material.is_lamina(mat):
         raise MaterialError(f"{mat.name} is not a Lamina material")
     if lamina_material.shader_node(mat) is None:
-        raise MaterialError(f"{mat.name} has no Lamina node (edited outside Lamina?); add it again with "
-                            f"Add SpongeCake Material")
+        raise MaterialError(f"{mat.name} has no Lamina node (edited outside Lamina?); {fix['no node']}")
     if not lamina_material.info(mat)["params"].get("multiple_scattering"):
-        raise MaterialError(f"{mat.name} has multiple scattering off: turn it on in the Lamina panel first")
+        raise MaterialError(f"{mat.name} has multiple scattering off: {fix['ms off']}")
 
 
 def cache_folder() -> str:
@@ -53,8 +64,9 @@ def cache_folder() -> str:
 class BakeRun:
     """One bake of one material (module docstring). Raises BakeError with a one-line reason when refused."""
 
-    def __init__(self, mat, folder: str | None = None):
-        check_material(mat)
+    def __init__(self, mat, folder: str | None = None, interface: str = PANEL):
+        check_material(mat, interface)
+        self.interface = interface
         self.material_name = mat.name
         self.warnings: list[str] = []
         self.sources = texture_wiring.sources(mat)
@@ -95,7 +107,7 @@ class BakeRun:
         mat = bpy.data.materials.get(self.material_name)
         if mat is None:
             raise BakeError(f"{self.material_name} was removed while baking")
-        check_material(mat)
+        check_material(mat, self.interface)
         if lamina_material.current_params(mat)[1] != self.params:
             raise BakeError(f"{mat.name} changed while baking; bake again")
         if not self.sources:
@@ -112,9 +124,9 @@ class BakeRun:
                 f"{self.folder}" + (" (cache hit: nothing recomputed)" if self.cache_hit else ""))
 
 
-def bake(mat, folder: str | None = None) -> tuple[str, list[str]]:
-    """Bake ``mat`` synchronously: (summary, warnings)."""
-    run = BakeRun(mat, folder)
+def bake(mat, folder: str | None = None, interface: str = PANEL) -> tuple[str, list[str]]:
+    """Bake ``mat`` synchronously: (summary, warnings); refusals worded for ``interface``."""
+    run = BakeRun(mat, folder, interface)
     while run.step():
         pass
     return run.finish(), run.warnings
@@ -122,17 +134,11 @@ def bake(mat, folder: str | None = None) -> tuple[str, list[str]]:
 
 def bake_file(blend: str, material: str, out: str) -> tuple[str, list[str]]:
     """Open ``blend``, bake ``material`` (textures, or constants when no texture drives it) and save the file as
-    ``out`` atomically; nothing is saved when the bake is refused."""
-    bpy.ops.wm.open_mainfile(filepath=blend)
-    mat = bpy.data.materials.get(material)
-    if mat is None:
-        names = ", ".join(sorted(m.name for m in bpy.data.materials)) or "none"
-        raise MaterialError(f"no material {material!r} in {blend} (it has: {names})")
-    summary, warnings = bake(mat)
-    with atomic_path(out) as tmp:
-        os.remove(tmp)  # Blender would keep a .blend1 backup of the file it saves over
-        if "FINISHED" not in bpy.ops.wm.save_as_mainfile(filepath=tmp, copy=True):
-            raise BakeError(f"could not save {out}")
+    ``out`` atomically; nothing is saved when the bake is refused. A file Blender cannot read or a material it
+    does not have raise ``blend_io.BlendArgumentError``."""
+    blend_io.open_blend(blend)
+    summary, warnings = bake(blend_io.find_material(material, blend), interface=CLI)
+    blend_io.save_copy(out)
     return summary, warnings
 
 

@@ -1,11 +1,53 @@
-"""Write a self-contained .blend with a Lamina material on a lit sphere (no add-on needed to render it)."""
+""".blend files for the headless commands: a self-contained .blend with a Lamina material on a lit sphere (no
+add-on needed to render it), and opening a user's file, finding a material in it and saving a copy, with
+Blender's own console lines hidden (``console.blender_quiet``)."""
 from __future__ import annotations
+
+import os
 
 import bpy  # noqa: I001 - bpy must be imported before bmesh in the bpy module
 import bmesh
 
 from ..bake.exr import atomic_path
+from ..console import blender_quiet
 from ..nodes import material as lamina_material
+
+
+class BlendArgumentError(ValueError):
+    """The .blend or the material a command was given cannot be used (a bad argument: nothing was changed)."""
+
+
+class SaveError(RuntimeError):
+    """Blender could not save the result (the work failed; the destination is unchanged)."""
+
+
+def open_blend(path: str) -> None:
+    """Open ``path`` as the current file; BlendArgumentError when Blender cannot read it."""
+    try:
+        with blender_quiet():
+            bpy.ops.wm.open_mainfile(filepath=path)
+    except RuntimeError as e:
+        reason = str(e).strip().splitlines()[-1] if str(e).strip() else "unreadable"
+        raise BlendArgumentError(f"--blend {path!r}: Blender cannot read it ({reason.split(': ')[-1]})") from None
+
+
+def find_material(name: str, path: str):
+    """The material ``name`` of the open file ``path``; BlendArgumentError naming the ones it has."""
+    mat = bpy.data.materials.get(name)
+    if mat is None:
+        names = ", ".join(sorted(m.name for m in bpy.data.materials)) or "none"
+        raise BlendArgumentError(f"--material {name!r}: no such material in {path} (it has: {names})")
+    return mat
+
+
+def save_copy(path: str) -> None:
+    """Save the open file as ``path`` atomically (no .blend1 backup); SaveError when Blender cannot."""
+    with atomic_path(path) as tmp:
+        os.remove(tmp)  # Blender would keep a .blend1 backup of the file it saves over
+        with blender_quiet():
+            saved = "FINISHED" in bpy.ops.wm.save_as_mainfile(filepath=tmp, copy=True)
+        if not saved:
+            raise SaveError(f"Blender could not save {path}")
 
 
 def preview_scene(mat, name: str) -> bpy.types.Scene:
@@ -51,7 +93,7 @@ def write_material_blend(model_id: str, p, form: str, name: str, path: str) -> N
     mat = lamina_material.new_material(model_id, p, form, name=f"Lamina {name}")
     scene = preview_scene(mat, name)
     try:
-        with atomic_path(path) as tmp:
+        with atomic_path(path) as tmp, blender_quiet():
             bpy.data.libraries.write(tmp, {scene}, fake_user=True)
     finally:
         remove_new_data(before)

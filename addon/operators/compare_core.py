@@ -56,8 +56,9 @@ def compare(material, bsdf_eval: Callable, scenes: Sequence | None = None, sampl
     that comparing several materials against the same reference renders it once.
 
     Returns ``{scene_name: {rmse, rel_rmse, max_abs_error, worst_pixels, cycles_seconds,
-    reference_seconds, samples, seed, pixels, exposure, heat_vmax, kind, resolution, files}}``;
-    ``worst_pixels`` are (row, col, cycles_rgb, reference_rgb), row 0 = top.
+    reference_seconds, reference_cached, samples, seed, pixels, exposure, heat_vmax, kind, resolution, files}}``;
+    ``worst_pixels`` are (row, col, cycles_rgb, reference_rgb), row 0 = top; ``reference_seconds`` is the time the
+    reference took when it was rendered, ``reference_cached`` whether this call took it from ``reference_cache``.
     """
     scenes = list(_scenes.default_scenes() if scenes is None else scenes)
     names = [s.name for s in scenes]
@@ -82,7 +83,8 @@ def compare(material, bsdf_eval: Callable, scenes: Sequence | None = None, sampl
 
         tell((i + 0.5) / n, f"{scene.name}: reference")
         cache = {} if reference_cache is None else reference_cache
-        if scene.name not in cache:
+        reference_cached = scene.name in cache
+        if not reference_cached:
             t0 = time.perf_counter()
             image = _scenes.reference_image(scene, bsdf_eval, bsdf_albedo=bsdf_albedo, quadrature=quadrature)
             cache[scene.name] = (image, time.perf_counter() - t0)
@@ -96,6 +98,7 @@ def compare(material, bsdf_eval: Callable, scenes: Sequence | None = None, sampl
         entry.update({
             "cycles_seconds": cycles_seconds,
             "reference_seconds": reference_seconds,
+            "reference_cached": reference_cached,
             "samples": spp,
             "seed": int(seed),
             "kind": scene.kind,

@@ -1,4 +1,4 @@
-"""Comparison runs shared by the operator, the CLI, the demo and the benchmarks (bpy).
+"""Comparison runs shared by the operator, the CLI, the demo (``demo``) and the benchmarks (bpy).
 
 A run renders a Lamina material with Cycles and with the bundled reference on the standard scenes
 (``reference.scenes``) and also measures the mapping alone: the numpy prediction of what the form renders
@@ -10,13 +10,12 @@ rendered by Cycles and by the reference) and SS + MS from Monte Carlo (the close
 the random walk's orders >= 2 at sampled pixels, ``addon.ms_truth``). The entries gain an ``ms`` dict.
 
 Thin coats can also be compared with what an artist would otherwise use, Blender's Principled BSDF coat set up
-from the same parameters (``principled``: ``principled_coat``; entries gain a ``principled`` dict), and with the
+from the same parameters (``principled``: ``nodes.principled_coat``; entries gain a ``principled`` dict), and with the
 Monte Carlo ground truth of the coat's light paths at sampled pixels (``truth``: a ``CoatTruth``, when
 ``reference.thin_coat_truth`` is installed; entries gain a ``truth`` dict).
 """
 from __future__ import annotations
 
-import html
 import importlib
 import json
 import os
@@ -25,15 +24,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import ms_truth, presets
-from ..bake.exr import atomic_path, read_exr, read_png, write_exr, write_png
+from .. import ms_truth
+from ..bake.exr import atomic_path, read_exr, write_exr, write_png
 from ..models import MODELS
 from ..nodes import material as lamina_material
 from ..nodes import predicted_image
+from ..nodes import principled_coat as principled_mapping
 from ..reference import metrics
 from ..reference import scenes as ref_scenes
 from . import blend_io, compare_core
-from . import principled_coat as principled_mapping
 
 SCENES = ref_scenes.KINDS
 
@@ -67,14 +66,9 @@ def has_blends(model_id: str) -> bool:
     return hasattr(reference_module(model_id), "BLENDS")
 
 
-def principled_coat(p, name: str = "Lamina Principled coat"):
-    """A new material: Blender's Principled BSDF coat set up from thin-coat parameters ``p``
-    (``operators.principled_coat.settings``: what an artist would otherwise use)."""
-    return principled_mapping.new_material(p, name)
-
-
 def has_principled(model_id: str) -> bool:
-    """Whether the model has a Principled BSDF counterpart to render beside it (``principled_coat``)."""
+    """Whether the model's Principled BSDF (``principled_settings``) renders the same material, to be compared beside
+    it (thin coats: ``nodes.principled_coat``); the others' only has about the same lobe count."""
     return principled_mapping.supports(model_id)
 
 
@@ -92,10 +86,19 @@ def has_truth(model_id: str) -> bool:
     return truth_module(model_id) is not None
 
 
+OPAQUE = ("no light passes through this material (an opaque base, substrate or bulk, or layers too thick to "
+          "cross): the scene would be black")
+
+
+def inapplicable_scenes(p) -> dict[str, str]:
+    """The standard scenes that show nothing of ``p``, with the reason: the backlit one where no light passes
+    (``p.transmits``: an opaque base, substrate or bulk, or layers too thick)."""
+    return {} if getattr(p, "transmits", True) else {"backlit": OPAQUE}
+
+
 def default_scene_names(p) -> list[str]:
-    """The standard scenes worth rendering for ``p``: all of them, but the backlit one only for parameters that
-    transmit (a thin coat over a base shows nothing there)."""
-    return [s for s in SCENES if s != "backlit" or getattr(p, "transmits", True)]
+    """The standard scenes worth rendering for ``p``: all of them but ``inapplicable_scenes``."""
+    return [s for s in SCENES if s not in inapplicable_scenes(p)]
 
 
 @dataclass(frozen=True)
@@ -177,7 +180,7 @@ def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_
 
 def principled_comparison(model_id: str, p, spec, cycles, reference, samples: int, seed: int, out_dir: str,
                           cache: dict) -> dict:
-    """Blender's Principled BSDF coat set up from ``p`` (``operators.principled_coat.settings``), rendered by Cycles on the
+    """Blender's Principled BSDF coat set up from ``p`` (``nodes.principled_coat.settings``), rendered by Cycles on the
     same scene with the same samples and seed (once per scene: it does not depend on the form), against the
     reference: its relative RMSE beside the form's, ``<scene>_principled.exr`` and ``<scene>_principled.png`` =
     Lamina (Cycles) | reference | Principled coat | error Lamina | error Principled (one exposure, one heat
@@ -193,7 +196,7 @@ def principled_comparison(model_id: str, p, spec, cycles, reference, samples: in
 
         before = blend_io.snapshot()
         try:
-            mat = principled_coat(p, name="Lamina compare Principled coat")
+            mat = lamina_material.principled_material(model_id, p, name="Lamina compare Principled coat")
             cache[key] = render_cycles(mat, spec, samples, seed, files["principled"])
         finally:
             blend_io.remove_new_data(before)
@@ -218,7 +221,7 @@ PRINCIPLED_PANELS = ("Lamina (Cycles)", "reference", "Principled coat", "error L
 
 def comparison_picture(images, reference, mask, heat_mask=None, gap: int = 2) -> np.ndarray:
     """``images`` side by side (uint8) at the reference's exposure, then the error map of every image but the
-    reference itself (those not ``reference``) against it, one heat scale (10% of the reference's mean);
+    reference itself (those not ``reference``) against it, one heat scale (``metrics.HEAT_SCALE``);
     ``heat_mask`` limits the error maps (default ``mask``)."""
     heat_mask = mask if heat_mask is None else heat_mask
     exposure = metrics.auto_exposure(reference, mask)
@@ -354,8 +357,8 @@ def ms_comparison(model_id: str, p, spec, cycles, network, settings: ms_truth.Tr
     """Cycles (SS + MS) | reference SS only | reference SS + MS (network) | SS + MS Monte Carlo for one scene:
     relative RMSEs, the ground truth's noise, ``<scene>_single.exr``, ``<scene>_ground_truth.exr`` and
     ``<scene>_ms.png`` (those four pictures, then the error maps network vs Monte Carlo and SS only vs Monte
-    Carlo, one exposure and one heat scale = 10% of the ground truth's mean). Errors against the Monte Carlo
-    are taken over its sampled pixels only."""
+    Carlo, one exposure and one heat scale, ``metrics.HEAT_SCALE`` of the ground truth's mean). Errors against the
+    Monte Carlo are taken over its sampled pixels only."""
     if model_id != "spongecake":
         raise ValueError(f"multiple-scattering ground truth exists for spongecake only, not {model_id}")
     p_ss = ms_truth.single_scattering(p)
@@ -446,7 +449,7 @@ def compare_params(model_id: str, p, forms, scenes, samples: int, resolution: in
 
 
 REPORT_KEYS = ("rmse", "rel_rmse", "max_abs_error", "mapping_rel_rmse", "cycles_seconds", "reference_seconds",
-               "samples", "worst_pixels", "files", "ms", "blends", "principled", "truth")
+               "reference_cached", "samples", "worst_pixels", "files", "ms", "blends", "principled", "truth")
 
 
 def _json_entry(entry: dict, out_dir: str) -> dict:
@@ -463,9 +466,9 @@ def _json_entry(entry: dict, out_dir: str) -> dict:
 def scene_lines(entries: dict) -> list[str]:
     lines = []
     for scene, e in entries.items():
+        reference = "cached" if e["reference_cached"] else f"{e['reference_seconds']:.3g} s"
         lines.append(f"{scene}: RMSE {e['rmse']:.3g}, rel. RMSE {e['rel_rmse']:.2%} (mapping alone "
-                     f"{e['mapping_rel_rmse']:.2%}), Cycles {e['cycles_seconds']:.2f} s, reference "
-                     f"{e['reference_seconds']:.2f} s")
+                     f"{e['mapping_rel_rmse']:.2%}), Cycles {e['cycles_seconds']:.3g} s, reference {reference}")
         if "ms" in e:
             lines.append("  " + ms_line(e["ms"]))
         if "blends" in e:
@@ -521,64 +524,3 @@ def show_side_by_side(context, entries: dict, out_dir: str):
             area.spaces.active.image = image
             break
     return image
-
-
-# ------------------------------------------------------------------------------------------------ demo
-
-
-def demo(forms, scenes, samples: int, resolution: int, seed: int, out_dir: str, model_id: str = "spongecake"):
-    """Compare every preset and write ``index.html`` (what a new user looks at first). ``scenes`` None: each
-    preset's ``default_scene_names``. A model with a Principled counterpart (thin coats) gets it beside."""
-    reports = []
-    for name in presets.names(model_id):
-        p = MODELS[model_id].params_from_dict(presets.load(model_id, name))
-        print(f"lamina: {name}…", flush=True)
-        report = compare_params(model_id, p, forms, scenes, samples, resolution, seed, os.path.join(out_dir, name),
-                                label=name, principled=has_principled(model_id))
-        print(summary_lines(report), flush=True)
-        reports.append(report)
-    write_text_atomic(os.path.join(out_dir, "index.html"), index_html(reports, model_id))
-    write_png(os.path.join(out_dir, "overview.png"), overview(reports, out_dir))
-    return reports
-
-
-def overview(reports, out_dir: str, form: str = "osl", scene: str = "sphere") -> np.ndarray:
-    """The side-by-side pictures of one scene for every preset, stacked top to bottom in preset order."""
-    rows = [read_png(os.path.join(out_dir, r["label"], r["forms"][form][scene]["files"]["side_by_side"]))
-            for r in reports if form in r["forms"] and scene in r["forms"][form]]
-    width = max(r.shape[1] for r in rows)
-    gap = np.zeros((4, width, 3), dtype=np.uint8)
-    padded = [np.pad(r[..., :3], ((0, 0), (0, width - r.shape[1]), (0, 0))) for r in rows]
-    return np.concatenate([x for r in padded for x in (r, gap)][:-1], axis=0)
-
-
-def index_html(reports, model_id: str) -> str:
-    rows = []
-    for r in reports:
-        name = r["label"]
-        rows.append(f"<h2>{html.escape(name)}</h2><p>{html.escape(presets.description(model_id, name))}</p>")
-        principled = "principled" in r
-        picture = " | ".join(PRINCIPLED_PANELS) if principled else "Cycles | reference | error"
-        rows.append("<table><tr><th>form</th><th>scene</th><th>rel. RMSE</th><th>mapping alone</th>"
-                    + ("<th>Principled coat</th>" if principled else "")
-                    + f"<th>Cycles s</th><th>reference s</th><th>{html.escape(picture)}</th></tr>")
-        for form, entries in r["forms"].items():
-            for scene, e in entries.items():
-                img = e["principled"]["files"]["principled_picture"] if principled else e["files"]["side_by_side"]
-                img = html.escape(f"{name}/{img}")
-                cell = f"<td>{e['principled']['rel_rmse']:.2%}</td>" if principled else ""
-                rows.append(f"<tr><td>{form}</td><td>{scene}</td><td>{e['rel_rmse']:.2%}</td>"
-                            f"<td>{e['mapping_rel_rmse']:.2%}</td>{cell}<td>{e['cycles_seconds']:.2f}</td>"
-                            f"<td>{e['reference_seconds']:.2f}</td><td><img src=\"{img}\"></td></tr>")
-        rows.append("</table>")
-    style = ("body{font-family:sans-serif;background:#222;color:#ddd}td,th{padding:4px 8px}"
-             "img{image-rendering:pixelated;height:128px}")
-    return (f"<!doctype html><html><head><meta charset=utf-8><title>Lamina {model_id} presets</title>"
-            f"<style>{style}</style></head><body><h1>Lamina: {model_id} presets, Cycles vs reference</h1>"
-            f"<p>Samples {reports[0]['samples']}, resolution {reports[0]['resolution']}, seed {reports[0]['seed']}. "
-            f"Relative RMSE = RMSE / mean of the reference over the object; 'mapping alone' is the noise-free "
-            f"error of the form's closures against the reference (docs/accuracy.md)."
-            + (" 'Principled coat' is Blender's Principled BSDF coat set up from the same parameters "
-               f"({html.escape(principled_mapping.MAPPING)}), against the same reference."
-               if "principled" in reports[0] else "") + "</p>"
-            + "\n".join(rows) + "</body></html>")

@@ -34,6 +34,7 @@ import bpy
 import numpy as np
 
 from ..bake.exr import atomic_path, read_exr
+from ..console import blender_quiet
 from ..reference import scenes as _scenes
 
 __all__ = ["render_cycles", "material_uses_osl", "build_scene"]
@@ -258,7 +259,8 @@ def render_cycles(material, scene_spec, samples, seed, out_exr_path):
         with atomic_path(out_exr_path) as tmp:
             scene.render.filepath = tmp
             t0 = time.perf_counter()
-            result = bpy.ops.render.render(write_still=True, scene=scene.name)
+            with blender_quiet():
+                result = bpy.ops.render.render(write_still=True, scene=scene.name)
             seconds = time.perf_counter() - t0
             if "FINISHED" not in result or not os.path.exists(tmp) or os.path.getsize(tmp) == 0:
                 raise RuntimeError(f"Cycles render of {scene_spec.name!r} failed ({result})")

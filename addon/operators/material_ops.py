@@ -3,7 +3,6 @@ instead of editing the user's: an existing material is never modified, only a sl
 from __future__ import annotations
 
 import math
-import os
 
 import bpy
 
@@ -350,14 +349,10 @@ def add_porous_file(blend: str, material: str, data: dict, form: str, out: str,
                     preset: str | None = None) -> tuple[str, list[str]]:
     """Open ``blend``, add a porous layer over ``material`` (a new material, assigned to every object slot that
     used the original; the original stays in the file with a fake user) and save the file as ``out`` atomically.
-    Returns a one-line summary and the warnings. Nothing is saved when it is refused (PorousError)."""
-    from ..bake.exr import atomic_path
-
-    bpy.ops.wm.open_mainfile(filepath=blend)
-    source = bpy.data.materials.get(material)
-    if source is None:
-        names = ", ".join(sorted(m.name for m in bpy.data.materials)) or "none"
-        raise PorousError(f"no material {material!r} in {blend} (it has: {names})")
+    Returns a one-line summary and the warnings. Nothing is saved when it is refused (PorousError, or
+    ``blend_io.BlendArgumentError`` for a file Blender cannot read or a material it does not have)."""
+    blend_io.open_blend(blend)
+    source = blend_io.find_material(material, blend)
     warnings = []
     try:
         mat = wrap.add_porous_layer(source, data, form, name=f"{source.name} + {wrap.label(preset)}",
@@ -372,10 +367,7 @@ def add_porous_file(blend: str, material: str, data: dict, form: str, out: str,
     if form == "osl" and not any(s.cycles.shading_system for s in bpy.data.scenes):
         warnings.append("the OSL form renders only with Render Properties > Open Shading Language on (CPU or "
                         "OptiX); Lamina does not change scene settings")
-    with atomic_path(out) as tmp:
-        os.remove(tmp)  # Blender would keep a .blend1 backup of the file it saves over
-        if "FINISHED" not in bpy.ops.wm.save_as_mainfile(filepath=tmp, copy=True):
-            raise PorousError(f"could not save {out}")
+    blend_io.save_copy(out)
     return (f"added {mat.name!r} over {source.name!r} in {slots} object slot(s), {source.name!r} kept with a fake "
             f"user"), warnings
 

@@ -20,3 +20,9 @@ def load(model: str, name: str) -> dict:
 
 def description(model: str, name: str) -> str:
     return load(model, name).get("description", "")
+
+
+def demo_names(model: str) -> list[str]:
+    """The presets the demo runs by default (``"demo": true`` in their file): a few that show the model's range
+    and keep ``make demo`` short; ``demo --all-presets`` runs every one."""
+    return [name for name in names(model) if load(model, name).get("demo", False)]

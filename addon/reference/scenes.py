@@ -61,12 +61,23 @@ from typing import Callable
 import numpy as np
 
 __all__ = [
-    "Sun", "Scene", "KINDS", "sun_direction", "sphere_scene", "plane_scene", "backlit_scene",
+    "Sun", "Scene", "KINDS", "NOTES", "sun_direction", "sphere_scene", "plane_scene", "backlit_scene",
     "furnace_scene", "default_scenes", "pixel_geometry", "scene_mask", "reference_image",
     "directional_albedo", "lobe_view", "uv_sphere_mesh", "plane_half_size", "to_local",
 ]
 
 KINDS = ("sphere", "plane", "backlit", "furnace")
+# What each kind of scene shows, in one sentence for people reading a comparison (the demo's report).
+NOTES = {
+    "sphere": "A sphere under one sun 45° up, seen from straight above: the material as it looks on an object, "
+              "every angle between light, view and surface at once.",
+    "plane": "A flat sample under a sun 45° up, photographed in every direction at once (rows: the view from "
+             "overhead at the top to grazing at the bottom, columns: the view's azimuth): the reflection lobe.",
+    "backlit": "The same panorama with the sun 45° below the sample: the light the material lets through "
+               "(its transmission lobe).",
+    "furnace": "The same panorama in a uniform white sky, no sun: each pixel is the share of light the material "
+               "reflects or lets through towards that view (its directional albedo: 1 loses nothing).",
+}
 PANORAMA_KINDS = ("plane", "backlit", "furnace")
 
 BsdfEval = Callable[[np.ndarray, np.ndarray], np.ndarray]

@@ -92,8 +92,8 @@ def test_add_porous_refusals_write_nothing(scene_blend, tmp_path):
     out = tmp_path / "out.blend"
     r = lamina("add-porous", "--blend", str(scene_blend), "--material", "Chalk", "--preset", "dust_on_wood",
                "--out", str(out))
-    assert r.returncode == 1 and r.stderr.strip().count("\n") == 0
-    assert "no material 'Chalk'" in r.stderr and "it has: Other, Paint" in r.stderr
+    assert r.returncode == 2 and r.stderr.strip().count("\n") == 0
+    assert "--material 'Chalk': no such material" in r.stderr and "it has: Other, Paint" in r.stderr
     r = lamina("add-porous", "--blend", str(scene_blend), "--material", "Other", "--preset", "soot_on_clay",
                "--out", str(out))
     assert r.returncode == 0, r.stderr  # a material no object uses: added, reported
@@ -101,7 +101,7 @@ def test_add_porous_refusals_write_nothing(scene_blend, tmp_path):
     existing = out.read_bytes()
     r = lamina("add-porous", "--blend", str(out), "--material", "Other + Soot on clay", "--preset", "dust_on_wood",
                "--out", str(tmp_path / "again.blend"))
-    assert r.returncode == 1 and "already has a porous layer" in r.stderr
+    assert r.returncode == 2 and "already has a porous layer" in r.stderr  # a refusal of the material given
     r = lamina("add-porous", "--blend", str(scene_blend), "--material", "Paint", "--preset", "dust_on_wood",
                "--out", str(out))
     assert r.returncode == 2 and "--overwrite" in r.stderr

@@ -469,7 +469,7 @@ def test_cli_bake_writes_a_baked_copy(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("args, code, reason", [
-    (["--material", "Nope"], 2, "no material 'Nope'"),
+    (["--material", "Nope"], 2, "--material 'Nope': no such material"),
     (["--material", "Plain"], 2, "Plain is not a Lamina material"),
     (["--material", "Textured", "--exists"], 2, "exists; pass --overwrite"),
     (["--material", "Textured", "--no-out"], 2, "pass --out FILE, or --overwrite"),

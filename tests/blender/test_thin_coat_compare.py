@@ -16,8 +16,8 @@ import addon  # noqa: E402
 from addon import presets  # noqa: E402
 from addon.bake.exr import read_exr, read_png  # noqa: E402
 from addon.models import thin_coat as model  # noqa: E402
-from addon.nodes import material  # noqa: E402
-from addon.operators import compare_run, principled_coat  # noqa: E402
+from addon.nodes import material, principled_coat  # noqa: E402
+from addon.operators import compare_run  # noqa: E402
 from addon.reference import metrics, microfacet  # noqa: E402
 from addon.reference import scenes as S  # noqa: E402
 from addon.reference import thin_coat as ref  # noqa: E402
@@ -74,7 +74,7 @@ def test_a_slab_is_a_coated_glass_tinted_once():
 
 def test_the_principled_material_holds_the_settings():
     p = _preset("varnished_metal")
-    mat = principled_coat.new_material(p)
+    mat = material.principled_material(model.ID, p)
     bsdf = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     out = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
     assert out.inputs["Surface"].links[0].from_node == bsdf
@@ -106,6 +106,7 @@ def test_principled_comparison_renders_once_per_scene_and_reports_its_error(tmp_
 
 def test_default_scenes_show_backlit_only_for_a_slab():
     assert compare_run.default_scene_names(_preset("amber_lacquer")) == ["sphere", "plane", "furnace"]
+    assert compare_run.inapplicable_scenes(_preset("amber_lacquer")) == {"backlit": compare_run.OPAQUE}
     assert compare_run.default_scene_names(model.params_from_dict(SLAB)) == list(S.KINDS)
 
 

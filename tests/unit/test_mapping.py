@@ -206,3 +206,28 @@ def test_a_flake_normal_below_the_tangent_plane_maps_like_its_opposite(form):
     np.testing.assert_allclose(f[-1.0, "reference"], f[1.0, "reference"], rtol=1e-12)
     np.testing.assert_allclose(f[-1.0], f[1.0], rtol=1e-12, atol=1e-300)
     assert f[1.0].max() > 0.1
+
+
+def test_each_approximations_isolating_config_reports_itself_and_nothing_undeclared_is_reported():
+    from addon.models import MODELS
+    from addon.nodes import MAPPINGS
+
+    for m, declaration in MODELS.items():
+        table = MAPPINGS[m].APPROXIMATIONS
+        for name, (_, config) in table.items():
+            assert name in MAPPINGS[m].approximations_used(declaration.params_from_dict(config)), (m, name)
+        for config in [c for _, c in table.values()] + [presets.load(m, n) for n in presets.names(m)]:
+            used = MAPPINGS[m].approximations_used(declaration.params_from_dict(config))
+            assert set(used) <= set(table) and used == [n for n in table if n in used], (m, config)
+
+
+def test_what_the_mapping_renders_exactly_reports_no_approximation():
+    """Thick surface flakes are exactly half a GGX lobe (test above); a porous layer without grains is its bulk."""
+    from addon.models import micrograin
+    from addon.nodes import micrograin as micrograin_mapping
+
+    assert mapping.approximations_used(model.params_from_dict(presets.load(model.ID, "thick_flakes"))) == []
+    assert micrograin_mapping.approximations_used(micrograin.params_from_dict({"filling_factor": 0.0})) == []
+    # an opaque stack's transmission lobes carry nothing: their approximations are not in use
+    plastic = mapping.approximations_used(model.params_from_dict(presets.load(model.ID, "plastic")))
+    assert "translucent-lobe" not in plastic and "substrate-attenuation" in plastic

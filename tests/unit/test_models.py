@@ -65,3 +65,30 @@ def test_unknown_preset_names_the_available_ones():
     with pytest.raises(KeyError) as e:
         presets.load(model.ID, "velvet")
     assert "fabric" in str(e.value)
+
+
+def test_what_lets_light_through():
+    """Opaque substrates and stacks too thick to cross block the light; a dielectric substrate refracts it through.
+    A porous layer lets through what its bulk does (the grains are opaque)."""
+    from addon.models import micrograin
+
+    transmits = {n: model.params_from_dict(presets.load(model.ID, n)).transmits for n in presets.names(model.ID)}
+    assert transmits == {"copper_flakes": False, "fabric": True, "leaf": True, "plastic": False, "sheen": False,
+                         "thick_flakes": False, "window_shade": True}
+    assert model.params_from_dict({"layers": [{}], "substrate": {"type": "dielectric"}}).transmits
+    thick = {"layers": [{"thickness": model.OPAQUE_THICKNESS / 2}] * 2}
+    assert not model.params_from_dict(thick).transmits
+    porous = {n: micrograin.params_from_dict(presets.load(micrograin.ID, n)).transmits
+              for n in ("dirt_on_glass", "dust_on_wood", "mud_on_plastic")}
+    assert porous == {"dirt_on_glass": True, "dust_on_wood": False, "mud_on_plastic": False}
+    over_fabric = micrograin.params_from_dict({"bulk": {"type": "spongecake", "preset": "fabric"}})
+    assert over_fabric.transmits
+
+
+def test_preset_metadata_is_accepted_and_ignored():
+    from addon.models import MODELS
+
+    for m, declaration in MODELS.items():
+        p = declaration.default_params()
+        data = {**p.to_dict(), "name": "x", "description": "y", "demo": True}
+        assert declaration.validate(data).params == p, m

@@ -209,12 +209,15 @@ def test_metrics_on_synthetic_images():
 def test_heat_map_tonemap_side_by_side():
     ref = np.full((4, 5, 3), 0.5)
     cyc = ref.copy()
-    cyc[1, 1] += 0.05  # = 10% of the mean: full scale by default
+    cyc[1, 1] += 0.25  # = 50% of the mean: full scale by default
+    cyc[2, 2] -= 0.05  # = 10% of the mean: a fifth of the scale, between the first two stops
     mask = np.ones((4, 5), bool)
     mask[3, 4] = False
+    assert M.HEAT_SCALE == 0.5
     heat, vmax = M.heat_map(cyc, ref, mask)
-    assert vmax == pytest.approx(0.05)
+    assert vmax == pytest.approx(0.25)
     np.testing.assert_allclose(heat[1, 1], M.HEAT_STOPS[-1][1])
+    np.testing.assert_allclose(heat[2, 2], 0.8 * np.array(M.HEAT_STOPS[1][1]))
     np.testing.assert_allclose(heat[0, 0], 0.0)
     np.testing.assert_allclose(heat[3, 4], M.MASKED_GREY)
     t = M.tonemap(np.array([[[0.0, 0.5, 1.0], [2.0, np.nan, 0.0031308]]]), exposure=0)
@@ -223,7 +226,7 @@ def test_heat_map_tonemap_side_by_side():
     assert M.auto_exposure(np.full((3, 3, 3), 4.0)) == pytest.approx(-2.0)
     pic, info = M.side_by_side(cyc, ref, mask, exposure=1.0, gap=2)
     assert pic.shape == (4, 3 * 5 + 4, 3) and pic.dtype == np.uint8
-    assert info == {"exposure": 1.0, "heat_vmax": pytest.approx(0.05)}
+    assert info == {"exposure": 1.0, "heat_vmax": pytest.approx(0.25)}
     np.testing.assert_array_equal(pic[:, :5], M.tonemap(cyc, 1.0))
     np.testing.assert_array_equal(pic[:, 7:12], M.tonemap(ref, 1.0))
 

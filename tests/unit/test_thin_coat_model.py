@@ -51,7 +51,7 @@ def test_out_of_range_values_are_clamped_with_one_message_each():
     assert (p.kappa_top, p.eta, p.sigma_a, p.depth, p.bounces, p.base.ior) == (
         model.MAX_KAPPA, 1.0001, (0.0, 0.0, 1000.0), 0.0, model.MAX_BOUNCES, 3.0)
     assert len(v.warnings) == 7
-    for needle in ("kappa_top: 1e+07", "eta: 0.5", "sigma_a: -1", "sigma_a: 2000", "depth: -1", "bounces: 7",
+    for needle in ("kappa_top: 1e+07", "eta: 0.5", "sigma_a[0]: -1", "sigma_a[2]: 2000", "depth: -1", "bounces: 7",
                    "base: ior: 5"):
         assert any(needle in w and "clamped to" in w for w in v.warnings), needle
     nan = model.validate({"depth": float("nan")})

@@ -88,22 +88,3 @@ def settings(p) -> dict:
         out.update({"Base Color": (1.0, 1.0, 1.0), "Metallic": 0.0, "Transmission Weight": 1.0, "IOR": float(p.eta)})
     return out
 
-
-def new_material(p, name: str = "Lamina Principled coat"):
-    """A new material: a Principled BSDF with ``settings(p)`` into a Material Output (bpy)."""
-    import bpy
-
-    mat = bpy.data.materials.new(name)
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
-    tree = mat.node_tree
-    tree.nodes.clear()
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
-    bsdf = tree.nodes.new("ShaderNodeBsdfPrincipled")
-    bsdf.location = (-300, 0)
-    for socket, value in settings(p).items():
-        current = bsdf.inputs[socket].default_value
-        bsdf.inputs[socket].default_value = (tuple(value) + (1.0,))[:len(current)] if isinstance(value, tuple) \
-            else value
-    tree.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
-    return mat
