@@ -48,6 +48,7 @@ from ..models.thin_coat import params_from_dict
 from . import vmf, warping
 from .frames import as_directions, dot, normalize
 from .microfacet import fresnel_conductor, fresnel_dielectric
+from .montecarlo import batches, mean_stderr, transmittance, view_direction
 
 __all__ = ["projected_area_exact", "smith_g1", "sample_visible_normals", "surface_reflection", "ground_truth",
            "ground_truth_albedo"]
@@ -187,14 +188,6 @@ def _params(p):
     return params_from_dict(p) if isinstance(p, dict) else p
 
 
-def _transmittance(tau, cos_z):
-    """exp(-sigma_a d / |w_z|) per RGB channel; 1 where tau = 0, 0 at grazing with tau > 0."""
-    c = np.abs(cos_z)[:, None]
-    with np.errstate(divide="ignore", over="ignore"):
-        ratio = np.where(tau > 0.0, tau / np.maximum(c, 1e-300), 0.0)
-    return np.exp(-ratio)
-
-
 def _refract_branch(v, m, eta, kappa):
     """Refraction about the visible normals m (relative index eta): the transmitted direction (other side, local
     z < 0) and its shadowing G1, 0 under TIR or on the wrong side (the caller weights it by 1 - F)."""
@@ -301,7 +294,7 @@ def _walk(p, wo, n, rng, exits):
     d, g1 = _refract_branch(v, m, eta, kt)
     d, weight = _compact(d, ((1.0 - fres) * g1)[:, None] * ones)
     for k in range(bounces + 1):
-        weight = weight * _transmittance(tau, d[:, 2])  # down through the coat
+        weight = weight * transmittance(tau, d[:, 2])  # down through the coat
         d, weight = _compact(d, weight)
         v = -d  # at the bottom, seen from inside the coat: z > 0, the world frame is the local one
         if slab:
@@ -322,7 +315,7 @@ def _walk(p, wo, n, rng, exits):
             d, w = _bottom_reflection(p, v, rng)
             weight = weight * w
         d, weight = _compact(d, weight)
-        weight = weight * _transmittance(tau, d[:, 2])  # up through the coat
+        weight = weight * transmittance(tau, d[:, 2])  # up through the coat
         d, weight = _compact(d, weight)
         v = -d * _FLIP  # at the top from inside, in the mirrored frame (z > 0)
         if exits.nee:
@@ -339,25 +332,6 @@ def _walk(p, wo, n, rng, exits):
     return exits
 
 
-def _batches(n_paths, n_batches, seed):
-    n_batches = max(2, int(n_batches))
-    size = max(1, -(-int(n_paths) // n_batches))
-    return [(size, np.random.default_rng(s)) for s in np.random.SeedSequence(seed).spawn(n_batches)]
-
-
-def _mean_stderr(per_batch):
-    per_batch = np.asarray(per_batch)
-    return per_batch.mean(axis=0), per_batch.std(axis=0, ddof=1) / math.sqrt(len(per_batch))
-
-
-def _viewer(wo):
-    wo = np.asarray(wo, dtype=float).reshape(3)
-    wo = wo / np.linalg.norm(wo)
-    if wo[2] <= 0.0:
-        raise ValueError("wo must be above the coat (wo_z > 0)")
-    return wo
-
-
 # ------------------------------------------------------------------------------------------ public estimators
 
 def ground_truth(p, wi, wo, n_paths=20000, seed=0, n_batches=N_BATCHES):
@@ -365,16 +339,16 @@ def ground_truth(p, wi, wo, n_paths=20000, seed=0, n_batches=N_BATCHES):
     (bounces + 1, M, 3). wo (3,) above; rows wi (M, 3) above give reflection orders (f[0]: the exact surface
     reflection, stderr 0), rows below the slab's transmission orders (f[k]: exits through the bottom after k
     bottom reflections). Next-event estimation over n_paths paths in n_batches independent batches."""
-    p, wo = _params(p), _viewer(wo)
+    p, wo = _params(p), view_direction(wo)
     wi = normalize(as_directions(wi))
     per_batch = []
-    for size, rng in _batches(n_paths, n_batches, seed):
+    for size, rng in batches(n_paths, n_batches, seed):
         exits = _walk(p, wo, size, rng, _Exits(p, wi))
         est = np.zeros((p.bounces + 1, len(wi), 3))
         est[:, exits.up] = exits.reflection / size
         est[:, exits.down] = exits.transmission / size
         per_batch.append(est)
-    f, stderr = _mean_stderr(per_batch)
+    f, stderr = mean_stderr(per_batch)
     cos_i = np.abs(wi[:, 2])
     with np.errstate(divide="ignore", invalid="ignore"):
         scale = np.where(cos_i > 0.0, 1.0 / cos_i, 0.0)[None, :, None]
@@ -392,13 +366,13 @@ def ground_truth_albedo(p, wo, n_paths=20000, seed=0, n_batches=N_BATCHES, max_e
     (bounces + 1, 3) (zeros unless slab), "stderr": {"reflection", "transmission"} of the same shapes, "exits":
     {"reflection", "transmission"}, per order a (directions (K, 3), weights (K, 3)) pair of exit samples (the
     first max_exit_samples of them, in path order; for ``warping.sample_moments``), and "n_paths" (the paths traced)."""
-    p, wo = _params(p), _viewer(wo)
+    p, wo = _params(p), view_direction(wo)
     names = ("reflection", "transmission")
     energies = {name: [] for name in names}
     samples = {name: [[] for _ in range(p.bounces + 1)] for name in names}
     kept = {name: np.zeros(p.bounces + 1, dtype=int) for name in names}
     total = 0
-    for size, rng in _batches(n_paths, n_batches, seed):
+    for size, rng in batches(n_paths, n_batches, seed):
         exits = _walk(p, wo, size, rng, _Exits(p))
         total += size
         for name in names:
@@ -412,7 +386,7 @@ def ground_truth_albedo(p, wo, n_paths=20000, seed=0, n_batches=N_BATCHES, max_e
                     kept[name][k] += min(room, len(d))
     out = {"stderr": {}, "exits": {}, "n_paths": total}
     for name in names:
-        out[name], out["stderr"][name] = _mean_stderr(energies[name])
+        out[name], out["stderr"][name] = mean_stderr(energies[name])
         out["exits"][name] = [(np.concatenate([d for d, _ in s] + [np.zeros((0, 3))]),
                                np.concatenate([w for _, w in s] + [np.zeros((0, 3))])) for s in samples[name]]
     return out
