@@ -198,22 +198,3 @@ def _prediction(lobes, weights) -> Prediction:
     below = rows_.params_from_rows(rows_.flipped(lobes[1]))
     return Prediction(above, tuple(weights[0, 0:3]), tuple(weights[0, 3:6]),
                       below, tuple(weights[1, 0:3]), tuple(weights[1, 3:6]))
-
-
-def eval_multiple(params: model.Params, wi: np.ndarray, wo: np.ndarray, prediction: Prediction | None = None):
-    """The predicted multiple-scattering part of f(wi, wo), (N, 3), no cosine. With a substrate, the layers' own
-    prediction (trained without one) closes at the substrate: reflection above only (the "ms-over-substrate"
-    approximation, measured against the random walk in docs/accuracy.md)."""
-    from ..reference import spongecake as reference
-
-    pred = prediction or predict(params)
-    up = (wo[:, 2] > 0)[:, None]  # the viewer's side picks the prediction (module docstring)
-    same = (wi[:, 2] > 0) == (wo[:, 2] > 0)
-    f = np.where(up, reference.eval(pred.lobe, wi, wo), reference.eval(pred.lobe_below, wi, wo))
-    w2r = np.where(up, pred.reflection, pred.reflection_below)
-    w2t = np.where(up, pred.transmission, pred.transmission_below)
-    f = f + np.where(same[:, None], w2r, w2t) / np.pi
-    if params.substrate is not None:
-        f = f * ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
-    grazing = (wi[:, 2] == 0) | (wo[:, 2] == 0)
-    return np.where(grazing[:, None], 0.0, f)

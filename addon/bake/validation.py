@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from . import layer_rows
-from .spongecake import eval_multiple, predict_with
+from ..reference.spongecake import eval_multiple
+from .spongecake import predict_with
 
 ARRAYS = ("rows", "wi", "wo", "ms", "ms_half_diff", "ss")
 

@@ -35,6 +35,7 @@ import numpy as np
 from ..reference import microfacet
 from ..reference.frames import dot as _dot
 from ..reference.frames import normalize as _normalize
+from .numpy_math import NumpyMath
 
 
 def ggx_d(h_local, alpha_x, alpha_y):
@@ -185,11 +186,9 @@ def rational_beckmann_lambda(b, s):
 
 def beckmann_lambda(cos_v, alpha):
     """Cycles' Smith Λ for Beckmann at cos θ = ``cos_v`` (``rational_beckmann_lambda`` in numpy)."""
-    from .expr import NumpyBackend
-
     c2 = np.minimum(np.asarray(cos_v, dtype=float) ** 2, 1.0)
     s = np.asarray(alpha, dtype=float) ** 2 * np.maximum(1.0 / np.maximum(c2, 1e-300) - 1.0, 0.0)
-    return rational_beckmann_lambda(NumpyBackend, s)
+    return rational_beckmann_lambda(NumpyMath, s)
 
 
 def beckmann_d(cos_h, alpha):

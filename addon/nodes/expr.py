@@ -17,6 +17,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import closures_np
+from .numpy_math import MIN_LOG, NumpyMath
+
 # Smallest cosine a weight formula divides by: keeps grazing pixels finite (they get weight → 0 anyway).
 MIN_COS = 1e-6
 # Script-node input fed by the Geometry node's Tangent: Cycles' default tangent for anisotropic closures
@@ -24,8 +27,6 @@ MIN_COS = 1e-6
 TANGENT_INPUT = "LaminaTangent"
 # A direction projected into the tangent plane shorter than this is replaced by the default tangent.
 MIN_TANGENT = 1e-6
-# Smallest argument of a logarithm (float32-safe: its log is finite).
-MIN_LOG = 1e-30
 # Largest grey weight a node group gives a closure without a colour input (Mix Shaders, whose factor Cycles clamps to
 # [0, 1], one per unit: ``NodeBackend._scaled``); mappings cap such weights at it so that both forms agree.
 MAX_MIX_WEIGHT = 4
@@ -36,7 +37,7 @@ BULK_INPUT = "Bulk"
 # --------------------------------------------------------------------------------------------- numpy
 
 
-class NumpyBackend:
+class NumpyBackend(NumpyMath):
     """Evaluate a mapping in float64 for N view directions ``wo`` (local frame, z = normal).
 
     ``metallic_node``: whether the node group predicted (form "nodes") has Blender 4.3+'s Metallic BSDF node (a
@@ -95,20 +96,6 @@ class NumpyBackend:
         length = np.linalg.norm(v, axis=1, keepdims=True)
         return np.where(length > MIN_TANGENT, v / np.maximum(length, MIN_TANGENT), np.array([1.0, 0.0, 0.0]))
 
-    # -- math
-    exp = staticmethod(np.exp)
-    log = staticmethod(lambda x: np.log(np.maximum(x, MIN_LOG)))
-    sqrt = staticmethod(lambda x: np.sqrt(np.maximum(x, 0.0)))
-    maximum = staticmethod(np.maximum)
-    minimum = staticmethod(np.minimum)
-    abs = staticmethod(np.abs)
-    cos = staticmethod(np.cos)
-    acos = staticmethod(lambda x: np.arccos(np.clip(x, -1.0, 1.0)))
-
-    @staticmethod
-    def step_below(x, edge):
-        return np.where(x < edge, 1.0, 0.0)
-
     def scale(self, color, s):
         return color * np.asarray(s)[..., None]
 
@@ -163,8 +150,6 @@ class NumpyBackend:
         """Blender 4.2 only, (N, 3): what its GGX sampling adds under a uniform environment of radiance 1 reached
         by BSDF sampling alone (the furnace scene), from light below a tilted closure normal that evaluation
         gives 0 (``closures_np.ggx_sampling_leak``); zero for closures around the shading normal."""
-        from . import closures_np
-
         out = np.zeros((self.n, 3))
         for kind, color, kw in self.closures:
             if kind == "ggx":
@@ -175,8 +160,6 @@ class NumpyBackend:
         """The directional albedo (N, 3) of the closures that have a quadrature of their own (``closures_np.ALBEDO``:
         Lambert exactly, Beckmann lobes of any sharpness in slope space), and whether other closures remain (for
         ``evaluate(wi, own=False)`` on a direction grid)."""
-        from . import closures_np
-
         out = np.zeros((self.n, 3))
         for kind, color, kw in self.closures:
             if kind in closures_np.ALBEDO:
@@ -186,8 +169,6 @@ class NumpyBackend:
     def evaluate(self, wi: np.ndarray, own: bool = True) -> np.ndarray:
         """The BSDF value (no cosine) that the recorded closures give for light from ``wi`` (with ``own`` False, only
         the closures without an albedo quadrature of their own, see ``own_albedo``)."""
-        from . import closures_np
-
         wi = np.asarray(wi, dtype=np.float64)
         f = np.zeros((self.n, 3))
         for kind, color, kw in self.closures:
@@ -428,8 +409,6 @@ def lobe_fresnel(b, color, eta, alpha):
     microfacet: a Fresnel-free lobe whose colour takes the lobe's mean Fresnel by ``LOBE_FRESNEL_FIT`` (its energy;
     F(cos θo) would be exact at the mirror configuration only and far too bright on the plane for rough coats).
     [approx: lobe-fresnel-blender-4.2]"""
-    from .micrograin import fresnel_dielectric
-
     a, q = LOBE_FRESNEL_FIT
     mu = b.cos_view()
     pulled = mu + (1.0 - mu) * b.minimum(a * b.exp(q * b.log(alpha)), 1.0)
@@ -441,3 +420,11 @@ def schlick_at_view(b, color, f0, normal):
     c = 1.0 - b.maximum(b.dot_view(normal), 0.0)
     c2 = c * c
     return color * (f0 + b.scale(1.0 - f0, c2 * c2 * c))
+
+
+def fresnel_dielectric(b, c, eta):
+    """Unpolarised Fresnel reflectance at cos θ = c from outside a dielectric of relative IOR η ≥ 1."""
+    g = b.sqrt(eta * eta - 1.0 + c * c)
+    a = (g - c) / (g + c)
+    d = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    return 0.5 * a * a * (1.0 + d * d)

@@ -470,18 +470,28 @@ def _prune(mat, candidates) -> None:
     then the texture behind it), and their images when no one else uses them."""
     if not candidates:
         return
-    from . import texture_wiring  # it imports this module
-
     names = {n.name for n in candidates}
     while True:
         unused = [n for n in mat.node_tree.nodes if n.name in names and not any(o.is_linked for o in n.outputs)]
         if not unused:
             return
         names -= {n.name for n in unused}
-        texture_wiring._remove(mat, unused, keep=set())
+        remove_nodes(mat, unused)
 
 
-def _socket_key(node, name: str) -> str:
+def remove_nodes(mat, nodes, keep=()) -> None:
+    """Remove ``nodes`` from ``mat`` and their images that nothing else uses (but those named in ``keep``)."""
+    images = {n.image.name for n in nodes if getattr(n, "image", None) is not None} - set(keep)
+    for n in nodes:
+        mat.node_tree.nodes.remove(n)
+    for name in images:
+        image = bpy.data.images.get(name)
+        if image is not None and image.users == 0:
+            bpy.data.images.remove(image)
+
+
+def socket_key(node, name: str) -> str:
+    """The key of the input ``name`` of a Lamina node (a script node's sockets use identifier names)."""
     return name if node.bl_idname != "ShaderNodeScript" else _norm(name)
 
 
@@ -490,7 +500,7 @@ def _write_values(node, values: dict) -> bool:
     values are not rewritten, so a repeated bake triggers no depsgraph update."""
     changed = False
     for name, value in values.items():
-        socket = node.inputs[_socket_key(node, name)]
+        socket = node.inputs[socket_key(node, name)]
         new = _socket_value(value, socket.default_value)
         if socket.is_linked or _same(socket.default_value, new):
             continue
@@ -505,5 +515,5 @@ def _same(current, new) -> bool:
 
 
 def _read_socket(node, s):
-    v = node.inputs[_socket_key(node, s.name)].default_value
+    v = node.inputs[socket_key(node, s.name)].default_value
     return float(v) if s.kind == "float" else tuple(float(x) for x in v[:3])

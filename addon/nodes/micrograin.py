@@ -25,7 +25,7 @@ from __future__ import annotations
 from ..models import micrograin as model
 from ..models.params import Param
 from ..reference.micrograin import lambda_scheme
-from .expr import BULK_INPUT
+from .expr import BULK_INPUT, fresnel_dielectric
 from .spongecake import Socket
 
 
@@ -179,14 +179,6 @@ def specular_albedo_fit(b, mu, eta, alpha):
     a, q, s = ALBEDO_FIT
     pulled = mu + (1.0 - mu) * b.minimum(a * b.exp(q * b.log(alpha)), 1.0)
     return fresnel_dielectric(b, pulled, eta) * (1.0 - s * alpha * alpha)
-
-
-def fresnel_dielectric(b, c, eta):
-    """Unpolarised Fresnel reflectance at cos θ = c from outside a dielectric of relative IOR η ≥ 1."""
-    g = b.sqrt(eta * eta - 1.0 + c * c)
-    a = (g - c) / (g + c)
-    d = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-    return 0.5 * a * a * (1.0 + d * d)
 
 
 def _gaf_ratio(b, mu, tau0, beta, alpha):

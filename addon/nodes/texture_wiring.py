@@ -49,7 +49,7 @@ class Source:
 
 
 def _input(node, name: str):
-    return node.inputs[lamina_material._socket_key(node, name)]
+    return node.inputs[lamina_material.socket_key(node, name)]
 
 
 def linked_from(socket):
@@ -152,17 +152,7 @@ def baked_nodes(mat) -> list:
 
 def unwire(mat) -> None:
     """Remove Lamina's baked texture nodes (and images no one else uses); the user's nodes stay."""
-    _remove(mat, baked_nodes(mat), keep=set())
-
-
-def _remove(mat, nodes, keep: set) -> None:
-    images = {n.image.name for n in nodes if getattr(n, "image", None) is not None} - keep
-    for n in nodes:
-        mat.node_tree.nodes.remove(n)
-    for name in images:
-        image = bpy.data.images.get(name)
-        if image is not None and image.users == 0:
-            bpy.data.images.remove(image)
+    lamina_material.remove_nodes(mat, baked_nodes(mat))
 
 
 def _load_map(path: str):
@@ -224,6 +214,6 @@ def wire(mat, layout: dict, paths: dict, found: list[Source]) -> None:
         for n in created:
             tree.nodes.remove(n)
         raise
-    _remove(mat, old, keep={image.name for image in images.values()})
+    lamina_material.remove_nodes(mat, old, keep={image.name for image in images.values()})
     for output, target in links:
         tree.links.new(output, target)

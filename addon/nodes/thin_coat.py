@@ -55,8 +55,7 @@ from ..reference import thin_coat as reference
 from ..reference.vmf import INVERSE_BELOW, SERIES_BELOW
 from . import principled_coat
 from .closures_np import rational_beckmann_lambda
-from .expr import MAX_MIX_WEIGHT
-from .micrograin import fresnel_dielectric
+from .expr import MAX_MIX_WEIGHT, fresnel_dielectric
 from .spongecake import Socket
 
 COAT_PANEL = "Coat"

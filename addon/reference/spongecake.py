@@ -32,7 +32,7 @@ from ..models.spongecake import Layer, Params, Substrate, params_from_dict
 from . import hg, lobes, microfacet, sggx
 from .frames import as_directions, dot, spherical
 
-__all__ = ["Params", "Sample", "params_from_dict", "eval", "pdf", "sample", "delta_transmittance",
+__all__ = ["Params", "Sample", "params_from_dict", "eval", "eval_multiple", "pdf", "sample", "delta_transmittance",
            "directional_albedo", "furnace_albedo", "ground_truth", "ground_truth_albedo"]
 
 
@@ -192,10 +192,28 @@ def eval(params: Params, wi, wo):
     wi, wo = as_directions(wi), as_directions(wo)
     f = _stack_eval(params, wi, wo) + _substrate_eval(params, wi, wo)
     if params.multiple_scattering:
-        from ..bake.spongecake import eval_multiple
-
         f = f + eval_multiple(params, wi, wo)
     return np.where(((wi[:, 2] != 0) & (wo[:, 2] != 0))[:, None], f, 0.0)
+
+
+def eval_multiple(params: Params, wi: np.ndarray, wo: np.ndarray, prediction=None):
+    """The predicted multiple-scattering part of f(wi, wo), (N, 3), no cosine. With a substrate, the layers' own
+    prediction (trained without one) closes at the substrate: reflection above only (the "ms-over-substrate"
+    approximation, measured against the random walk in docs/accuracy.md). ``prediction``: the network's
+    (``bake.spongecake.predict``), computed when not given."""
+    from ..bake.spongecake import predict
+
+    pred = prediction or predict(params)
+    up = (wo[:, 2] > 0)[:, None]  # the viewer's side picks the prediction (module docstring)
+    same = (wi[:, 2] > 0) == (wo[:, 2] > 0)
+    f = np.where(up, eval(pred.lobe, wi, wo), eval(pred.lobe_below, wi, wo))
+    w2r = np.where(up, pred.reflection, pred.reflection_below)
+    w2t = np.where(up, pred.transmission, pred.transmission_below)
+    f = f + np.where(same[:, None], w2r, w2t) / np.pi
+    if params.substrate is not None:
+        f = f * ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
+    grazing = (wi[:, 2] == 0) | (wo[:, 2] == 0)
+    return np.where(grazing[:, None], 0.0, f)
 
 
 def delta_transmittance(params: Params, wi):

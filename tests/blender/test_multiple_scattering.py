@@ -54,7 +54,7 @@ def _assert_ms_inputs_are_the_prediction(mat):
 
 def _set_thickness(mat, value):
     node = material.shader_node(mat)
-    node.inputs[material._socket_key(node, "L1 Thickness")].default_value = value
+    node.inputs[material.socket_key(node, "L1 Thickness")].default_value = value
 
 
 @pytest.mark.parametrize("form", material.FORMS)

@@ -28,7 +28,7 @@ def _params(ms=False):
 
 def _input(mat, name):
     node = material.shader_node(mat)
-    return node.inputs[material._socket_key(node, name)]
+    return node.inputs[material.socket_key(node, name)]
 
 
 def _feeds(socket):

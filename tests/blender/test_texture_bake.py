@@ -113,7 +113,7 @@ def _texture(mat, param, path):
     tex.interpolation = "Closest"
     node = material.shader_node(mat)
     socket = textures.texturable_inputs(material.current_params(mat)[1])[(0, param)]
-    tree.links.new(tex.outputs["Color"], node.inputs[material._socket_key(node, socket)])
+    tree.links.new(tex.outputs["Color"], node.inputs[material.socket_key(node, socket)])
     return tex
 
 
@@ -149,7 +149,7 @@ def test_baked_maps_load_as_non_color_and_match_the_prediction_per_source_texel(
     nodes = {n.image.name: n for n in texture_wiring.baked_nodes(mat) if n.bl_idname == "ShaderNodeTexImage"}
     assert len(nodes) == len(layout)
     links = _ms_links(mat)
-    assert set(links) == {material._socket_key(material.shader_node(mat), s.name)
+    assert set(links) == {material.socket_key(material.shader_node(mat), s.name)
                           for s in mapping.sockets(p) if s.baked}
     for name, channels in layout.items():
         tex = next(n for n in nodes.values() if n.label == f"Lamina bake: {name}")
