@@ -323,7 +323,7 @@ def cmd_bench(args) -> int:
                            furnace_configs=args.ms_furnace_configs, failure_paths=args.ms_failure_paths,
                            speed_repeats=args.ms_repeats, bake_size=args.ms_bake_size)
     os.makedirs(out, exist_ok=True)
-    bench.run(out, samples=args.samples, resolution=args.resolution, ms=ms)
+    bench.run(out, bench.Sizes(samples=args.samples, resolution=args.resolution, ms=ms))
     return 0
 
 

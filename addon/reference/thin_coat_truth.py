@@ -40,7 +40,6 @@ standard errors come from independent batches.
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 

@@ -118,7 +118,7 @@ REFUSALS = [
      "--blend 'text.txt' is not a .blend file"),
     (("bake", "--blend", "corrupt.blend", "--material", MATERIAL, "--out", "x.blend"), "Blender cannot read it"),
     (("bake", "--blend", "in.blend", "--material", "Nope", "--out", "x.blend"),
-     f"--material 'Nope': no such material in"),
+     "--material 'Nope': no such material in"),
     (BAKE + ("--out", "x.blend"), "multiple scattering off: turn it on in Blender's Lamina panel, or write"),
     (BAKE, "pass --out FILE, or --overwrite to save over --blend"),
     (BAKE + ("--out", "in.blend"), "--out 'in.blend' exists; pass --overwrite"),

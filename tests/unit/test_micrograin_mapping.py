@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from addon import bench_micrograin
+from addon.bench import micrograin as bench_micrograin
 from addon.models import micrograin as model
 from addon.nodes import micrograin as mapping
 from addon.nodes import predicted_eval

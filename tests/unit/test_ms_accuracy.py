@@ -10,7 +10,8 @@ measuring code always run. No predicted number is hard-coded.
 import numpy as np
 import pytest
 
-from addon import bench, ms_truth
+from addon import ms_truth
+from addon.bench import spongecake as bench
 from addon.bake import layer_rows, validation
 from addon.bake import spongecake as ms
 from addon.models import spongecake as model

@@ -19,7 +19,7 @@ not see, and the isotropic lobe cannot follow the anisotropic exact lobe (Figs. 
 import numpy as np
 import pytest
 
-from addon import bench_thin_coat
+from addon.bench import thin_coat as bench_thin_coat
 from addon.models.thin_coat import params_from_dict
 
 CASES = ((1e3, 1e3), (1e4, 1e3))

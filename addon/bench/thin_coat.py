@@ -10,13 +10,13 @@ import itertools
 
 import numpy as np
 
-from . import presets
-from .bench import approximation_rows, fastest_renders, pct, preset_rows, reference_throughput, timed
-from .models import thin_coat as model
-from .reference import thin_coat as reference
-from .reference import thin_coat_truth as truth
-from .reference import vmf, warping
-from .reference.frames import spherical
+from .. import presets
+from ..models import thin_coat as model
+from ..reference import thin_coat as reference
+from ..reference import thin_coat_truth as truth
+from ..reference import vmf, warping
+from ..reference.frames import spherical
+from .common import approximation_rows, fastest_renders, pct, preset_rows, reference_throughput, timed
 
 MODEL = model.ID
 # The issue's grid: κ1, κ2 ∈ {10, 1e3, 1e6}, η ∈ {1.2, 1.5, 2}, without and with absorption.
@@ -149,6 +149,16 @@ def reciprocity_rows(n: int = 20000, seed: int = 5) -> list[dict]:
 # ------------------------------------------------------------------------------------------ markdown
 
 
+def accuracy(sizes) -> str:
+    """The thin coat sections of docs/accuracy.md (``bench.Sizes``)."""
+    return accuracy_markdown(sizes.resolution)
+
+
+def speed(sizes) -> str:
+    """The thin coat sections of docs/benchmarks.md (``bench.Sizes``)."""
+    return speed_markdown(sizes.timing_samples, sizes.timing_resolution)
+
+
 def accuracy_markdown(resolution: int) -> str:
     kit = vmf_kit_rows()
     lines = ["", "# Thin transparent coat (ENDF)", "",
@@ -239,7 +249,7 @@ def _truth_section() -> list[str]:
 
 
 def _mapping_section(resolution: int) -> list[str]:
-    from .nodes import thin_coat as mapping
+    from ..nodes import thin_coat as mapping
 
     lines = ["", "## Named approximations of the Cycles mapping", "",
              "Relative RMSE of the form's numpy prediction against the reference on a configuration chosen to feature "
@@ -267,7 +277,7 @@ def cost_per_sample(bounces: int, n: int = 20000, repeats: int = 3) -> dict:
 
 def render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
     """Cycles render time of the varnished_metal preset with 0..4 bounces, both forms."""
-    from .nodes import material as lamina_material
+    from ..nodes import material as lamina_material
 
     def materials(bounces):
         p = model.params_from_dict({**presets.load(MODEL, "varnished_metal"), "bounces": bounces})
@@ -279,7 +289,7 @@ def render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
 def preset_render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
     """Cycles render time of each preset as node group, OSL and a Principled BSDF coat of the same roughness and
     IOR (``nodes.principled_coat``, what an artist would otherwise use)."""
-    from .nodes import material as lamina_material
+    from ..nodes import material as lamina_material
 
     def materials(name):
         p = model.params_from_dict(presets.load(MODEL, name))
@@ -290,7 +300,7 @@ def preset_render_times(samples: int, resolution: int, repeats: int = 3) -> list
 
 
 def speed_markdown(samples: int, resolution: int) -> str:
-    rate = reference_throughput(model.params_from_dict(presets.load(MODEL, "varnished_metal")), model_id=MODEL)
+    rate = reference_throughput(model.params_from_dict(presets.load(MODEL, "varnished_metal")), MODEL)
     lines = ["", "## Thin transparent coat (ENDF)", "",
              f"Reference `thin_coat.eval`, varnished_metal (2 bounces), float64: **{rate / 1e6:.2f} M evals/s**.", "",
              "### Cost per sample against the bounce count (the paper's Table 2, in kind)", "",

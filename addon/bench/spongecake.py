@@ -1,58 +1,25 @@
-"""``make bench``: writes docs/accuracy.md and docs/benchmarks.md from measurements taken in one run.
-
-Accuracy (no sampling noise): each named approximation of the Cycles mapping, and each preset, measured as the
-relative RMSE of the form's numpy prediction against the reference on the comparison scenes. Tests check that
-Cycles renders these predictions (tests/blender/test_cycles_vs_prediction.py), so the numbers are what an
-artist gets. Reference vs Monte Carlo ground truth is measured on the presets too.
-Speed: reference throughput, and Cycles render times of node group : OSL : Principled BSDF from one run.
-Multiple scattering (``MsSizes``; ``bench --no-ms`` leaves it out): the networks against Monte Carlo on the
-held-out validation set and on the paper's failure case (low-roughness fibers), a white furnace of
-non-absorbing stacks, rendered SS + MS vs Monte Carlo on presets (``addon.ms_truth``), render time with MS on
-vs off and the bake time per megapixel.
-"""
+"""SpongeCake's sections of the benchmark documents: named approximations, presets and reference vs ground truth,
+the sheen alternative, multiple scattering (``MsSizes``; ``bench --no-ms`` leaves it out: the networks against
+Monte Carlo on the held-out validation set and on the paper's failure case, a white furnace of non-absorbing
+stacks, rendered SS + MS vs Monte Carlo on presets (``addon.ms_truth``), render time with MS on vs off, the bake
+time per megapixel), reference throughput and Cycles render times against a Principled BSDF."""
 from __future__ import annotations
 
-import datetime
-import importlib
 import os
-import time
 from dataclasses import dataclass
 
 import numpy as np
 
-from . import presets
-from .models import spongecake as model
-from .nodes import predicted_image
-from .nodes import spongecake as mapping
-from .reference import metrics
-from .reference import scenes as ref_scenes
-from .reference import spongecake as reference
+from .. import presets
+from ..models import spongecake as model
+from ..nodes import spongecake as mapping
+from ..reference import metrics
+from ..reference import scenes as ref_scenes
+from ..reference import spongecake as reference
+from .common import (ACCURACY_SCENES, approximation_rows, comparison_scenes, fastest_renders, mapping_errors, pct,
+                     reference_throughput, timed)
 
 MODEL = model.ID
-ACCURACY_SCENES = ("sphere", "plane", "backlit", "furnace")
-# The furnace reference needs the directional albedo per pixel; this many samples per pixel (MIS) keep
-# its noise near 1%, below the approximations measured here.
-ALBEDO_SAMPLES = 2048
-
-
-def _scenes(resolution: int):
-    """The comparison scenes; the furnace at half resolution (its reference costs an albedo per pixel)."""
-    scenes = [s for s in ref_scenes.default_scenes(resolution) if s.name in ACCURACY_SCENES]
-    return [s.with_resolution(resolution // 2, resolution // 4) if s.kind == "furnace" else s for s in scenes]
-
-
-def mapping_errors(p, resolution: int, model_id: str = MODEL) -> dict:
-    """{form: {scene: rel RMSE of the prediction vs the reference}} plus the reference's mean per scene."""
-    ref_model = importlib.import_module(f".reference.{model_id}", __package__)
-    out = {"osl": {}, "nodes": {}, "mean": {}}
-    for spec in _scenes(resolution):
-        ref = ref_scenes.reference_image(spec, lambda wi, wo: ref_model.eval(p, wi, wo),
-                                         bsdf_albedo=lambda wo: ref_model.furnace_albedo(p, wo, n=ALBEDO_SAMPLES))
-        mask = ref_scenes.scene_mask(spec)
-        out["mean"][spec.name] = float(ref[mask].mean())
-        for form in ("osl", "nodes"):
-            out[form][spec.name] = metrics.rel_rmse(predicted_image(model_id, p, form, spec), ref, mask)
-    return out
 
 
 def ground_truth_error(p, n_dirs: int = 4, n_paths: int = 20000, seed: int = 1) -> float:
@@ -69,56 +36,9 @@ def ground_truth_error(p, n_dirs: int = 4, n_paths: int = 20000, seed: int = 1) 
     return float(np.abs(analytic - single).mean() / np.abs(single).mean())
 
 
-def approximation_rows(model, approximations: dict, resolution: int, short=None) -> list[str]:
-    """Table rows of ``mapping_errors`` for each named approximation's configuration and scene: name, what it does,
-    the configuration (``short(config)``, when given), scene, reference mean, OSL, node group."""
-    rows = []
-    for name, (what, config) in approximations.items():
-        errs = mapping_errors(model.params_from_dict(config), resolution, model.ID)
-        shown = f" `{short(config)}` |" if short else ""
-        for scene in ACCURACY_SCENES:
-            rows.append(f"| {name} | {what} |{shown} {scene} | {errs['mean'][scene]:.4f} | {pct(errs['osl'][scene])} | "
-                        f"{pct(errs['nodes'][scene])} |")
-    return rows
-
-
-def preset_rows(model, resolution: int) -> list[str]:
-    """The "## Presets" table of ``mapping_errors`` for each of the model's presets and scene."""
-    lines = ["", "## Presets", "", "| preset | scene | ref. mean | OSL | node group |", "|---|---|---|---|---|"]
-    for name in presets.names(model.ID):
-        errs = mapping_errors(model.params_from_dict(presets.load(model.ID, name)), resolution, model.ID)
-        for scene in ACCURACY_SCENES:
-            lines.append(f"| {name} | {scene} | {errs['mean'][scene]:.4f} | {pct(errs['osl'][scene])} | "
-                         f"{pct(errs['nodes'][scene])} |")
-    return lines
-
-
-def reference_throughput(p, n: int = 200_000, repeats: int = 3, model_id: str = MODEL) -> float:
-    """Reference ``eval`` calls per second on random direction pairs (fastest of ``repeats``; the first call also
-    warms caches such as micrograin's specular albedo table)."""
-    ref_model = importlib.import_module(f".reference.{model_id}", __package__)
-    rng = np.random.default_rng(0)
-
-    def dirs():
-        v = rng.normal(size=(n, 3))
-        v /= np.linalg.norm(v, axis=1, keepdims=True)
-        return v
-
-    wi, wo = dirs(), dirs()
-    ref_model.eval(p, wi[:10], wo[:10])
-    best = min(timed(lambda: ref_model.eval(p, wi, wo)) for _ in range(repeats))
-    return n / best
-
-
-def timed(fn) -> float:
-    t = time.perf_counter()
-    fn()
-    return time.perf_counter() - t
-
-
 def render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
     """Cycles render time of each preset as node group, OSL and a Principled BSDF with a similar lobe count."""
-    from .nodes import material as lamina_material
+    from ..nodes import material as lamina_material
 
     def materials(name):
         p = model.params_from_dict(presets.load(MODEL, name))
@@ -128,54 +48,29 @@ def render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
     return fastest_renders(presets.names(MODEL), materials, samples, resolution, repeats)
 
 
-def fastest_renders(names, materials_of, samples: int, resolution: int, repeats: int = 3) -> list[dict]:
-    """For each name, the Cycles render time of the sphere scene for each material of ``materials_of(name)``
-    ({label: material}, created for the purpose and removed again): the fastest of ``repeats`` renders each,
-    which damps the machine's noise. Rows {"preset": name, label: seconds, ...}."""
-    import bpy
-
-    from .operators import blend_io
-    from .operators.cycles_render import render_cycles
-
-    spec = ref_scenes.sphere_scene(resolution=resolution)
-    path = os.path.join(bpy.app.tempdir, "bench.exr")
-    rows = []
-    for name in names:
-        before = blend_io.snapshot()
-        try:
-            times = {label: min(render_cycles(mat, spec, samples, 0, path)[1] for _ in range(repeats))
-                     for label, mat in materials_of(name).items()}
-        finally:
-            blend_io.remove_new_data(before)
-        rows.append({"preset": name, **times})
-    return rows
-
-
 # ------------------------------------------------------------------------------------------------ docs
 
 
-def pct(x: float) -> str:
-    return f"{100 * x:.1f}%" if np.isfinite(x) else "n/a"
+def accuracy(sizes) -> str:
+    """SpongeCake's sections of docs/accuracy.md (``bench.Sizes``)."""
+    out = accuracy_markdown(sizes.resolution) + sheen_alternative(sizes.timing_samples, sizes.resolution)
+    return out + (ms_accuracy_markdown(sizes.ms, sizes.samples, sizes.resolution) if sizes.ms is not None else "")
+
+
+def speed(sizes) -> str:
+    """SpongeCake's sections of docs/benchmarks.md (``bench.Sizes``)."""
+    out = benchmarks_markdown(sizes.timing_samples, sizes.timing_resolution)
+    if sizes.ms is not None:
+        out += ms_speed_markdown(sizes.ms, sizes.timing_samples, sizes.timing_resolution)
+    return out
 
 
 def accuracy_markdown(resolution: int) -> str:
-    lines = ["# Accuracy of the Cycles forms", "",
-             f"Generated by `make bench` (`python -m addon.cli bench --resolution {resolution} ...`, "
-             f"{datetime.date.today().isoformat()}); do not edit by hand.", "",
-             "Errors are relative RMSE (RMSE ÷ mean of the reference over the object) of what a form renders "
-             "against the float64 reference, on the comparison scenes of docs/architecture.md at "
-             f"{resolution} px, computed from the mapping's numpy prediction (no sampling noise; the Blender tests "
-             "check that Cycles renders this prediction). A scene whose reference is nearly black (e.g. backlit "
-             "for opaque stacks) inflates relative errors: its reference mean is listed.", "",
+    lines = ["# SpongeCake", "",
              "## Named approximations, each isolated", "",
              "| approximation | what it does | configuration | scene | ref. mean | OSL | node group |",
              "|---|---|---|---|---|---|---|"]
-    for name, (what, config) in mapping.APPROXIMATIONS.items():
-        p = model.params_from_dict(config)
-        errs = mapping_errors(p, resolution)
-        for scene in ACCURACY_SCENES:
-            lines.append(f"| {name} | {what} | `{_short(config)}` | {scene} | {errs['mean'][scene]:.4f} | "
-                         f"{pct(errs['osl'][scene])} | {pct(errs['nodes'][scene])} |")
+    lines += approximation_rows(model, mapping.APPROXIMATIONS, resolution, _short)
     lines += ["", "## Presets", "",
               "Reference vs ground truth: mean relative error of the analytic single scattering against the "
               "order-1 part of an independent random walk (4×4 × 4×4 direction pairs, 20 000 paths each).", "",
@@ -183,7 +78,7 @@ def accuracy_markdown(resolution: int) -> str:
     gt_rows = []
     for name in presets.names(MODEL):
         p = model.params_from_dict(presets.load(MODEL, name))
-        errs = mapping_errors(p, resolution)
+        errs = mapping_errors(p, resolution, MODEL)
         for scene in ACCURACY_SCENES:
             lines.append(f"| {name} | {scene} | {errs['mean'][scene]:.4f} | {pct(errs['osl'][scene])} | "
                          f"{pct(errs['nodes'][scene])} |")
@@ -204,12 +99,9 @@ def _short(config: dict) -> str:
 
 def benchmarks_markdown(samples: int, resolution: int) -> str:
     fabric = model.params_from_dict(presets.load(MODEL, "fabric"))
-    rate = reference_throughput(fabric)
+    rate = reference_throughput(fabric, MODEL)
     rows = render_times(samples, resolution)
-    lines = ["# Benchmarks", "",
-             f"Generated by `make bench` (`python -m addon.cli bench --samples {samples} ...`, "
-             f"{datetime.date.today().isoformat()}) on this machine "
-             f"({os.cpu_count()} CPU cores); do not edit by hand. Ratios come from one run.", "",
+    lines = ["## SpongeCake", "",
              f"Reference `spongecake.eval`, 2-layer fabric, float64: **{rate / 1e6:.2f} M evals/s**.", "",
              f"Cycles CPU render of the sphere scene, {resolution}×{resolution} px, {samples} samples, fastest of "
              "3 renders, no bounces (OSL scenes enable the OSL shading system, as users must). The Principled BSDF "
@@ -228,9 +120,9 @@ def sheen_alternative(samples: int, resolution: int) -> str:
     against the reference's single scattering, at the best constant scale, next to Lamina's Lambert lobe."""
     import bpy
 
-    from .nodes import material as lamina_material
-    from .operators import blend_io
-    from .operators.cycles_render import render_cycles
+    from ..nodes import material as lamina_material
+    from ..operators import blend_io
+    from ..operators.cycles_render import render_cycles
 
     lines = ["", "## Fibers along the normal: Cycles' Sheen closure as an alternative", "",
              "Cycles' Microfiber Sheen BSDF is a fit to fibers standing along the normal, so it was measured as "
@@ -268,7 +160,7 @@ def _fiber_along_n(thickness: float) -> dict:
 
 
 def _sheen_material(roughness: float):
-    from .nodes.material import empty_material
+    from ..nodes.material import empty_material
 
     mat, tree, out = empty_material("Lamina bench sheen")
     sheen = tree.nodes.new("ShaderNodeBsdfSheen")
@@ -286,7 +178,7 @@ def _sheen_material(roughness: float):
 class MsSizes:
     """How much work the multiple-scattering sections do (``bench --ms-*`` options)."""
 
-    validation: str = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+    validation: str = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
                                    "tests", "data", "spongecake_ms_validation")
     failure_paths: int = 4000  # random-walk paths per wi for the low-roughness fiber configurations
     failure_wi: int = 4  # a square number: incident directions per configuration
@@ -315,7 +207,7 @@ FURNACE_THETAS = (0.0, 45.0, 75.0, 85.0)  # view angles of the white furnace (de
 
 
 def _manifest(n_layers: int) -> dict:
-    from .bake import spongecake as ms
+    from ..bake import spongecake as ms
 
     try:
         return ms.network(n_layers).manifest
@@ -344,7 +236,7 @@ def weights_note() -> str:
 
 def validation_errors(folder: str) -> dict:
     """{layers: lobe_errors} of the shipped networks on the held-out Monte Carlo set (absent: not there)."""
-    from .bake import validation
+    from ..bake import validation
 
     out = {}
     for n in (1, 2):
@@ -371,7 +263,7 @@ def _stratified_hemisphere(rng, n: int) -> np.ndarray:
 def lobe_data(p, n_wi: int, n_wo: int, paths: int, seed: int) -> dict:
     """One configuration in the validation set's format: the walk's orders >= 2 on stratified directions,
     from two independent halves of ``paths`` (``ms_half_diff`` = half their difference)."""
-    from .bake import layer_rows
+    from ..bake import layer_rows
 
     rng = np.random.default_rng(seed)
     wi = _stratified_hemisphere(rng, n_wi)
@@ -388,7 +280,7 @@ def lobe_data(p, n_wi: int, n_wo: int, paths: int, seed: int) -> dict:
 
 def failure_case_errors(sizes: MsSizes) -> list[dict]:
     """The network's lobe error on low-roughness in-plane fibers against a fresh random walk."""
-    from .bake import validation
+    from ..bake import validation
 
     rows = []
     for i, (label, layers) in enumerate(FAILURE_CASES):
@@ -476,13 +368,13 @@ def rendered_ms_errors(name: str, sizes: MsSizes, samples: int, resolution: int)
     """{scene: ms entry per form} of ``compare_material`` with multiple scattering, on the accuracy scenes."""
     import tempfile
 
-    from .ms_truth import TruthSettings
-    from .nodes import material as lamina_material
-    from .operators import blend_io, compare_run
+    from ..ms_truth import TruthSettings
+    from ..nodes import material as lamina_material
+    from ..operators import blend_io, compare_run
 
     truth = sizes.truth or TruthSettings(**RENDER_TRUTH, seed=sizes.seed)
     p = model.params_from_dict({**presets.load(MODEL, name), "multiple_scattering": True})
-    specs = _scenes(resolution)
+    specs = comparison_scenes(resolution)
     cache, out = {}, {}
     with tempfile.TemporaryDirectory(prefix="lamina_bench_ms_") as tmp:
         for form in ("nodes", "osl"):
@@ -502,14 +394,14 @@ def bake_throughput(size: int) -> tuple[str, float]:
     """(what was timed, seconds per megapixel): ``bake.textures.bake_maps`` on a synthetic size × size input
     (2-layer fabric, textures on the top layer's albedo and roughness and the bottom layer's thickness) when
     that module exists, else the core inference ``predict_rows`` on size² texels."""
-    from .bake import layer_rows
-    from .bake import spongecake as ms
+    from ..bake import layer_rows
+    from ..bake import spongecake as ms
 
     p = model.params_from_dict({**presets.load(MODEL, "fabric"), "multiple_scattering": True})
     rng = np.random.default_rng(0)
     ms.network(len(p.layers))  # load once, outside the timing
     try:
-        from .bake import textures
+        from ..bake import textures
     except ImportError:
         textures = None
     if textures is not None:
@@ -533,9 +425,9 @@ def ms_render_times(names, samples: int, resolution: int, repeats: int) -> list[
     the renders alternate (SS, SS + MS, ...) and the fastest of ``repeats`` counts."""
     import bpy
 
-    from .nodes import material as lamina_material
-    from .operators import blend_io
-    from .operators.cycles_render import render_cycles
+    from ..nodes import material as lamina_material
+    from ..operators import blend_io
+    from ..operators.cycles_render import render_cycles
 
     spec = ref_scenes.sphere_scene(resolution=resolution)
     path = os.path.join(bpy.app.tempdir, "bench_ms.exr")
@@ -622,7 +514,7 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               f"{worst_view['theta']:.0f}°): the extra single-scattering lobe's albedo grows towards grazing views "
               "like single scattering does, and nothing in the network bounds the sum by 1 there."]
     # --- rendered
-    from .ms_truth import TruthSettings
+    from ..ms_truth import TruthSettings
 
     truth = sizes.truth or TruthSettings(**RENDER_TRUTH, seed=sizes.seed)
     lines += ["", "### Rendered: SS + MS vs Monte Carlo on the presets", "",
@@ -658,39 +550,3 @@ def ms_speed_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
                      f"{r['osl']:.2f} | {r['osl_ms']:.2f} | {r['osl_ms'] / r['osl']:.2f} |")
     lines += ["", f"Baking multiple scattering into textures: **{per_mp:.2f} s per megapixel** ({what}; fastest of 2)."]
     return "\n".join(lines) + "\n"
-
-
-def overview_picture(path: str, samples: int, resolution: int) -> None:
-    """docs/images/overview.png: every preset's sphere, OSL form | reference | error, top to bottom."""
-    import tempfile
-
-    from .bake.exr import read_png, write_png
-    from .demo_page import OVERVIEW
-    from .operators import demo
-
-    with tempfile.TemporaryDirectory(prefix="lamina_bench_") as tmp:
-        demo.run([MODEL], ["osl"], ["sphere"], samples, resolution, 0, tmp, all_presets=True)
-        write_png(path, read_png(os.path.join(tmp, OVERVIEW)))
-
-
-def run(out_dir: str, samples: int = 64, resolution: int = 64, ms: MsSizes | None = MS_DEFAULT) -> None:
-    """Both documents; ``ms`` sizes the multiple-scattering sections (None: leave them out)."""
-    from . import bench_micrograin, bench_thin_coat
-    from .operators.compare_run import write_text_atomic
-
-    os.makedirs(out_dir, exist_ok=True)
-    overview_picture(os.path.join(out_dir, "images", "overview.png"), samples * 2, resolution * 2)
-    accuracy = accuracy_markdown(resolution) + sheen_alternative(samples * 2, resolution)
-    if ms is not None:
-        accuracy += ms_accuracy_markdown(ms, samples, resolution)
-    accuracy += bench_micrograin.accuracy_markdown(resolution)
-    accuracy += bench_thin_coat.accuracy_markdown(resolution)
-    write_text_atomic(os.path.join(out_dir, "accuracy.md"), accuracy)
-    print(f"lamina: wrote {os.path.join(out_dir, 'accuracy.md')}", flush=True)
-    speed = benchmarks_markdown(samples * 2, resolution * 4)
-    if ms is not None:
-        speed += ms_speed_markdown(ms, samples * 2, resolution * 4)
-    speed += bench_micrograin.speed_markdown(samples * 2, resolution * 4)
-    speed += bench_thin_coat.speed_markdown(samples * 2, resolution * 4)
-    write_text_atomic(os.path.join(out_dir, "benchmarks.md"), speed)
-    print(f"lamina: wrote {os.path.join(out_dir, 'benchmarks.md')}", flush=True)

@@ -13,16 +13,16 @@ import math
 
 import numpy as np
 
-from . import presets
-from .bench import (approximation_rows, fastest_renders, pct, preset_rows,
+from .. import presets
+from ..models import micrograin as model
+from ..nodes import micrograin as mapping
+from ..reference import micrograin as reference
+from ..reference import micrograin_truth as truth
+from ..reference import scenes as ref_scenes
+from ..reference import metrics
+from ..reference.frames import spherical
+from .common import (approximation_rows, fastest_renders, pct, preset_rows,
                     reference_throughput)
-from .models import micrograin as model
-from .nodes import micrograin as mapping
-from .reference import micrograin as reference
-from .reference import micrograin_truth as truth
-from .reference import scenes as ref_scenes
-from .reference import metrics
-from .reference.frames import spherical
 
 MODEL = model.ID
 TAU_GRID = ((0.2, 0.5, 0.9), (0.3, 1.0), (0.0, 30.0, 60.0, 80.0))  # τ0, β, θ of the issue's Fig. 9 claim
@@ -73,7 +73,7 @@ def lambda_rows() -> list[dict]:
 def grain_albedo_fit() -> dict:
     """Largest |E_spec error| of the Cycles forms' fit (``nodes.micrograin.ALBEDO_FIT``) and of the smooth
     interface's F(μ) against the reference's tabulated albedo, over the fit's range."""
-    from .nodes.expr import NumpyBackend
+    from ..nodes.expr import NumpyBackend
 
     mu = np.linspace(0.02, 1.0, 25)
     b = NumpyBackend(np.zeros((len(mu), 3)), {})
@@ -137,6 +137,16 @@ def blend_differences(resolution: int) -> list[dict]:
             rows.append({"preset": name, "scene": spec.name,
                          **{b: metrics.rel_rmse(images[b], images["ours"], mask) for b in reference.BLENDS[1:]}})
     return rows
+
+
+def accuracy(sizes) -> str:
+    """The micrograin sections of docs/accuracy.md (``bench.Sizes``)."""
+    return accuracy_markdown(sizes.resolution)
+
+
+def speed(sizes) -> str:
+    """The micrograin sections of docs/benchmarks.md (``bench.Sizes``)."""
+    return speed_markdown(sizes.timing_samples, sizes.timing_resolution)
 
 
 def accuracy_markdown(resolution: int) -> str:
@@ -206,7 +216,7 @@ def accuracy_markdown(resolution: int) -> str:
 def render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
     """Cycles render time of each preset's porous layer over a Principled BSDF (both forms, both GAFs) and of
     the Principled BSDF alone."""
-    from .nodes import material as lamina_material
+    from ..nodes import material as lamina_material
 
     def materials(name):
         data = {**presets.load(MODEL, name), "bulk": {"type": model.WRAPPED}}
@@ -223,14 +233,14 @@ def render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
 
 def _plug_principled(mat, p) -> None:
     """Feed the layer's Bulk input with the Principled BSDF it is timed against (``mapping.principled_settings``)."""
-    from .nodes import material as lamina_material
+    from ..nodes import material as lamina_material
 
     bsdf = lamina_material.principled_node(mat.node_tree, mapping.principled_settings(p))
     mat.node_tree.links.new(bsdf.outputs[0], lamina_material.shader_node(mat).inputs["Bulk"])
 
 
 def speed_markdown(samples: int, resolution: int) -> str:
-    rate = reference_throughput(model.params_from_dict(presets.load(MODEL, "rust_on_metal")), model_id=MODEL)
+    rate = reference_throughput(model.params_from_dict(presets.load(MODEL, "rust_on_metal")), MODEL)
     rows = render_times(samples, resolution)
     lines = ["", "## Micrograin porous layer", "",
              f"Reference `micrograin.eval`, rust_on_metal (conductor grains over a rough metal), float64: "
