@@ -387,6 +387,14 @@ class OslBackend:
     metal_min_ratio = 0.0
 
     def metal(self, alpha_x, alpha_y, tangent, eta, k, weight=1.0):
+        """A constant extinction 0 is a dielectric: ``dielectric_bsdf`` without transmission, one per distinct IOR
+        (Blender 4.2's ``conductor_bsdf`` approximates the Fresnel, far off for small k)."""
+        if isinstance(k, tuple) and not any(k):
+            for e in sorted(set(eta)):
+                mask = _osl(tuple(1.0 if x == e else 0.0 for x in eta)).code
+                self._closure(weight, f'dielectric_bsdf(N, {tangent.code}, {mask}, color(0), {_osl(alpha_x).code}, '
+                                      f'{_osl(alpha_y).code}, {_num(e)}, "ggx")')
+            return
         self._closure(weight, f'conductor_bsdf(N, {tangent.code}, {_osl(alpha_x).code}, {_osl(alpha_y).code}, '
                            f'{_osl(eta).code}, {_osl(k).code}, "ggx")')
 

@@ -37,18 +37,30 @@ def clean_file(monkeypatch):
 SHARP_TOP = 0.1  # a top interface with min α below this has sub-pixel highlights on the 32 px sphere
 
 
-@pytest.mark.parametrize("name", presets.names(model.ID))
+def _by_structure(named: dict) -> list[tuple[str, ...]]:
+    """The names of ``named`` (name -> parameters) grouped by the mapping's structure: one node group per test."""
+    groups: dict = {}
+    for name, p in named.items():
+        groups.setdefault(mapping.structure_key(p), []).append(name)
+    return [tuple(names) for names in groups.values()]
+
+
+PRESETS = {name: model.params_from_dict(presets.load(model.ID, name)) for name in presets.names(model.ID)}
+
+
+@pytest.mark.parametrize("names", _by_structure(PRESETS), ids=lambda names: "+".join(names))
 @pytest.mark.parametrize("form", ["nodes", "osl"])
-def test_cycles_renders_the_predicted_mapping(name, form, tmp_path):
+def test_cycles_renders_the_predicted_mapping(names, form, tmp_path):
     """The generated node group / OSL computes exactly the mapping's closures: within 2% on the plane and the sphere,
     8% on the sphere for sharp tops (module docstring: the mesh's normals)."""
-    p = model.params_from_dict(presets.load(model.ID, name))
-    mat = material.new_material(model.ID, p, form)
-    for spec in (SPHERE, PLANE):
-        img = render(mat, spec, 32, tmp_path)
-        err = relative_error(img, predicted_image(model.ID, p, form, spec), spec)
-        sharp = spec is SPHERE and min(p.interfaces[0].alpha) < SHARP_TOP
-        assert err < (0.08 if sharp else 0.02), f"{name} {form} {spec.name}: {err:.4f}"
+    for name in names:
+        p = PRESETS[name]
+        mat = material.new_material(model.ID, p, form)
+        for spec in (SPHERE, PLANE):
+            img = render(mat, spec, 32, tmp_path)
+            err = relative_error(img, predicted_image(model.ID, p, form, spec), spec)
+            sharp = spec is SPHERE and min(p.interfaces[0].alpha) < SHARP_TOP
+            assert err < (0.08 if sharp else 0.02), f"{name} {form} {spec.name}: {err:.4f}"
 
 
 def test_a_texture_driven_rotation_renders_each_half_as_predicted(tmp_path):
@@ -96,14 +108,22 @@ EXTREMES = {
 }
 
 
-@pytest.mark.parametrize("case", sorted(EXTREMES))
-@pytest.mark.parametrize("form", ["nodes", "osl"])
-def test_extremes_render_finite_non_negative_pixels(case, form, tmp_path):
-    p = model.params_from_dict(EXTREMES[case])
-    mat = material.new_material(model.ID, p, form)
-    for spec in (S.sphere_scene(resolution=16), S.plane_scene(resolution=(16, 8))):
-        img = render(mat, spec, 8, tmp_path)
-        assert np.isfinite(img).all() and (img >= 0).all() and img.max() > 0.0, f"{case} {form} {spec.name}"
+def _extreme_runs() -> list:
+    """(form, cases) per structure; the node group of four interfaces (a minute to build) is marked slow."""
+    groups = _by_structure({k: model.params_from_dict(v) for k, v in EXTREMES.items()})
+    return [pytest.param(form, cases, id=f"{form}-{'+'.join(cases)}",
+                         marks=[pytest.mark.slow] if form == "nodes" and "four interfaces" in cases else [])
+            for form in ("nodes", "osl") for cases in groups]
+
+
+@pytest.mark.parametrize("form, cases", _extreme_runs())
+def test_extremes_render_finite_non_negative_pixels(form, cases, tmp_path):
+    for case in cases:
+        p = model.params_from_dict(EXTREMES[case])
+        mat = material.new_material(model.ID, p, form)
+        for spec in (S.sphere_scene(resolution=16), S.plane_scene(resolution=(16, 8))):
+            img = render(mat, spec, 8, tmp_path)
+            assert np.isfinite(img).all() and (img >= 0).all() and img.max() > 0.0, f"{case} {form} {spec.name}"
 
 
 STRUCTURES = {
