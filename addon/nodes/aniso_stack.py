@@ -34,6 +34,7 @@ import numpy as np
 from ..models import aniso_stack as model
 from ..reference import aniso_stack as reference
 from ..reference import aniso_stack_tables as tables
+from ..reference import microfacet
 from .expr import METAL_MIN_RATIO
 from .spongecake import Socket
 from .thin_coat import BackendOps, fresnel_conductor
@@ -73,21 +74,30 @@ def approximations_used(p: model.Params) -> list[str]:
 
 
 def principled_settings(p: model.Params) -> dict:
-    """Blender's Principled BSDF standing for the stack: an anisotropic GGX base from the bottom interface (a metal
-    with the conductor's colour at normal incidence, or a dielectric of its IOR) and, for more than one interface,
-    a coat from the top one (its IOR and isotropic equivalent roughness)."""
+    """Blender's Principled BSDF standing for the stack: an anisotropic GGX base from the bottom interface seen from
+    the medium above it (as ``principled_coat`` does for thin coats: a metal with the conductor's colour at normal
+    incidence, or a black dielectric of the relative IOR) and, for more than one interface, a coat from the top one
+    (its IOR and isotropic equivalent roughness)."""
     bottom, top = p.interfaces[-1], p.interfaces[0]
+    above = p.interfaces[-2].ior if len(p.interfaces) > 1 else (1.0, 1.0, 1.0)
+    eta, k = reference.relative(bottom, above)
     out = {"Roughness": _principled_roughness(bottom), "Anisotropic": _principled_anisotropy(bottom),
-           "Anisotropic Rotation": (bottom.rotation / 360.0) % 1.0}
+           "Anisotropic Rotation": (_larger_alpha_angle(bottom) / 360.0) % 1.0}
     if bottom.type == "conductor":
-        f0 = _normal_reflectance(bottom)
-        out.update({"Base Color": f0, "Metallic": 1.0})
+        f0 = microfacet.fresnel_conductor(np.array([1.0]), eta, k)[0]
+        out.update({"Base Color": tuple(float(c) for c in f0), "Metallic": 1.0})
     else:
-        out.update({"Base Color": (0.0, 0.0, 0.0), "Metallic": 0.0, "IOR": float(np.mean(bottom.ior))})
+        relative = float(np.mean(eta))
+        out.update({"Base Color": (0.0, 0.0, 0.0), "Metallic": 0.0, "IOR": max(relative, 1.0 / relative)})
     if len(p.interfaces) > 1:
         out.update({"Coat Weight": 1.0, "Coat IOR": float(np.mean(top.ior)),
                     "Coat Roughness": math.sqrt(reference.rms_alpha(reference.F64, top.alpha_x, top.alpha_y))})
     return out
+
+
+def _larger_alpha_angle(interface) -> float:
+    """The direction (degrees) of the interface's larger α: Principled's tangent carries the larger one."""
+    return interface.rotation + (0.0 if interface.alpha_x >= interface.alpha_y else 90.0)
 
 
 def _principled_roughness(interface) -> float:
@@ -98,13 +108,6 @@ def _principled_anisotropy(interface) -> float:
     """Principled's anisotropy a with α_x / α_y = (1 − 0.9a) (Cycles: aspect = sqrt(1 − 0.9a)), in [0, 1]."""
     ratio = min(interface.alpha_x, interface.alpha_y) / max(interface.alpha_x, interface.alpha_y)
     return float(min(max((1.0 - ratio) / 0.9, 0.0), 1.0))
-
-
-def _normal_reflectance(interface) -> tuple:
-    from ..reference import microfacet
-
-    f0 = microfacet.fresnel_conductor(np.array([1.0]), interface.ior, interface.k)[0]
-    return tuple(float(c) for c in f0)
 
 
 # ------------------------------------------------------------------------------------------ sockets
