@@ -1,9 +1,10 @@
 """Cycles shaders generated from each model's mapping (``<model>.py``, bpy-free) in two forms:
 a native node group (``node_backend``) and an OSL script node (``osl``); ``material`` assembles them."""
-from . import bulk, micrograin, spongecake, thin_coat
+from . import aniso_stack, bulk, micrograin, spongecake, thin_coat
 
 # Model id -> mapping; "bulk" is the simple BSDFs that reference bulks under a porous layer are made of.
-MAPPINGS = {"spongecake": spongecake, "micrograin": micrograin, "thin_coat": thin_coat, bulk.ID: bulk}
+MAPPINGS = {"spongecake": spongecake, "micrograin": micrograin, "thin_coat": thin_coat, "aniso_stack": aniso_stack,
+            bulk.ID: bulk}
 FORMS = ("nodes", "osl")  # node group (every device) and OSL script (CPU, OptiX)
 FORM_LABELS = {"nodes": "node group", "osl": "OSL"}
 

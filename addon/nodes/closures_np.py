@@ -84,7 +84,7 @@ def ensure_valid_specular_reflection(normal, wo):
     return np.where(valid[:, None], normal, bent)
 
 
-def _ggx(wi, wo, alpha_x, alpha_y, normal, tangent, f0, below_normal: bool):
+def _ggx(wi, wo, alpha_x, alpha_y, normal, tangent, f0, below_normal: bool, conductor=None):
     """GGX as Cycles evaluates it around the bent ``normal``, as a BSDF w.r.t. z (light above the surface
     only): for light above the closure's normal, or (``below_normal``) for light below it."""
     n = len(wi)
@@ -107,7 +107,15 @@ def _ggx(wi, wo, alpha_x, alpha_y, normal, tangent, f0, below_normal: bool):
     f = np.repeat(f[:, None], 3, axis=1)
     if f0 is not None:
         f = f * microfacet.schlick(f0, _dot(li, h))
+    if conductor is not None:
+        f = f * microfacet.fresnel_conductor(_dot(li, h), *conductor)
     return f
+
+
+def ggx_conductor(wi, wo, alpha_x, alpha_y, tangent, eta, k):
+    """Cycles' anisotropic GGX conductor (OSL conductor_bsdf, the Metallic BSDF's physical conductor) around z with
+    the exact Fresnel of η + ik per microfacet."""
+    return _ggx(wi, wo, alpha_x, alpha_y, (0.0, 0.0, 1.0), tangent, None, False, conductor=(eta, k))
 
 
 def ggx_reflection(wi, wo, alpha_x, alpha_y=None, normal=(0.0, 0.0, 1.0), tangent=(1.0, 0.0, 0.0), f0=None):
@@ -392,6 +400,7 @@ def beckmann_refraction_albedo(wo, alpha, ior, normal):
 
 EVAL = {
     "ggx": ggx_reflection,
+    "ggx_conductor": ggx_conductor,
     "diffuse": diffuse,
     "translucent": translucent,
     "transparent": transparent,

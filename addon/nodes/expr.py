@@ -30,6 +30,8 @@ MIN_TANGENT = 1e-6
 # Largest grey weight a node group gives a closure without a colour input (Mix Shaders, whose factor Cycles clamps to
 # [0, 1], one per unit: ``NodeBackend._scaled``); mappings cap such weights at it so that both forms agree.
 MAX_MIX_WEIGHT = 4
+# The smallest α_x / α_y of the node group's anisotropic Metallic BSDF (aspect² = 1 − 0.9 · anisotropy ≥ 0.1).
+METAL_MIN_RATIO = 0.1
 # The Shader input that carries the material a model wraps (micrograin's bulk).
 BULK_INPUT = "Bulk"
 
@@ -99,6 +101,15 @@ class NumpyBackend(NumpyMath):
     def scale(self, color, s):
         return color * np.asarray(s)[..., None]
 
+    def rotated_tangent(self, angle):
+        """The tangent turned by ``angle`` (radians) about the normal, towards the bitangent."""
+        angle = np.broadcast_to(angle, (self.n,))
+        return np.stack([np.cos(angle), np.sin(angle), np.zeros(self.n)], axis=1)
+
+    def has_metal(self) -> bool:
+        """Whether the predicted form has ``metal`` (OSL; node groups on Blender 4.3+)."""
+        return self.form == "osl" or self.metallic_node
+
     # -- closures (recorded, evaluated by ``evaluate``)
     def _add(self, kind, color, **kw):
         self.closures.append((kind, color, kw))
@@ -109,6 +120,17 @@ class NumpyBackend(NumpyMath):
         if tangent is None:
             tangent = self.tangent_plane(np.broadcast_to([1.0, 0.0, 0.0], (self.n, 3)))
         self._add("ggx", color, alpha_x=alpha_x, alpha_y=alpha_y, normal=normal, tangent=tangent, f0=f0)
+
+    def metal(self, alpha_x, alpha_y, tangent, eta, k, weight=1.0):
+        """Anisotropic GGX with the exact Fresnel of complex IOR η + ik per microfacet (k = 0: a dielectric's
+        reflection), ``alpha_x`` ≤ ``alpha_y``, ``alpha_x`` along ``tangent``, times a grey ``weight`` in [0, 1]
+        (node groups: ``alpha_x`` ≥ ``metal_min_ratio`` ``alpha_y``)."""
+        self._add("ggx_conductor", np.ones((self.n, 3)) * np.asarray(weight, dtype=float)[..., None],
+                  alpha_x=alpha_x, alpha_y=alpha_y, tangent=tangent, eta=eta, k=k)
+
+    @property
+    def metal_min_ratio(self) -> float:
+        return METAL_MIN_RATIO if self.form == "nodes" else 0.0
 
     def diffuse(self, color):
         self._add("diffuse", color)
@@ -315,6 +337,30 @@ class OslBackend:
     def acos(self, x):
         return self._call("acos", self.maximum(self.minimum(x, 1.0), -1.0))
 
+    def sin(self, x):
+        return self._call("sin", x)
+
+    def atan2(self, y, x):
+        return self._call("atan2", y, x)
+
+    def multiply_add(self, a, s, c):
+        return self._let(_osl(a) * s + c)
+
+    def channel(self, color, i: int):
+        c = self._let(_osl(color), "color")
+        return self._let(OslValue(f"{c.code}[{i}]", "float"))
+
+    def channel_mean(self, color):
+        c = self._let(_osl(color), "color")
+        return self._let(OslValue(f"({c.code}[0] + {c.code}[1] + {c.code}[2]) / 3.0", "float"))
+
+    def rotated_tangent(self, angle):
+        a = self._let(_osl(angle), "float")
+        return self._let(OslValue(f"cos({a.code}) * Tn + sin({a.code}) * Bn", "vector"))
+
+    def has_metal(self) -> bool:
+        return True
+
     def step_below(self, x, edge):
         return self._let(OslValue(f"({_osl(x).code} < {_osl(edge).code} ? 1.0 : 0.0)", "float"))
 
@@ -337,6 +383,20 @@ class OslBackend:
         else:
             self._closure(1.0, f'generalized_schlick_bsdf({normal.code}, {t}, {_osl(color).code}, color(0), '
                                f'{ax}, {ay}, {_osl(f0).code}, color(1), 5.0, "ggx")')
+
+    metal_min_ratio = 0.0
+
+    def metal(self, alpha_x, alpha_y, tangent, eta, k, weight=1.0):
+        """A constant extinction 0 is a dielectric: ``dielectric_bsdf`` without transmission, one per distinct IOR
+        (Blender 4.2's ``conductor_bsdf`` approximates the Fresnel, far off for small k)."""
+        if isinstance(k, tuple) and not any(k):
+            for e in sorted(set(eta)):
+                mask = _osl(tuple(1.0 if x == e else 0.0 for x in eta)).code
+                self._closure(weight, f'dielectric_bsdf(N, {tangent.code}, {mask}, color(0), {_osl(alpha_x).code}, '
+                                      f'{_osl(alpha_y).code}, {_num(e)}, "ggx")')
+            return
+        self._closure(weight, f'conductor_bsdf(N, {tangent.code}, {_osl(alpha_x).code}, {_osl(alpha_y).code}, '
+                           f'{_osl(eta).code}, {_osl(k).code}, "ggx")')
 
     def diffuse(self, color):
         self._closure(color, "diffuse(N)")

@@ -5,7 +5,8 @@ import math
 
 import bpy
 
-from .expr import BULK_INPUT, MAX_MIX_WEIGHT, MIN_COS, MIN_LOG, MIN_TANGENT, lobe_fresnel, schlick_at_view
+from .expr import (BULK_INPUT, MAX_MIX_WEIGHT, METAL_MIN_RATIO, MIN_COS, MIN_LOG, MIN_TANGENT, lobe_fresnel,
+                   schlick_at_view)
 
 COLUMN = 190
 ROW = 150
@@ -212,6 +213,36 @@ class NodeBackend:
     def acos(self, x):
         return self._math("ARCCOSINE", x)  # Cycles' safe_acosf clamps to [-1, 1]
 
+    def sin(self, x):
+        return self._math("SINE", x)
+
+    def atan2(self, y, x):
+        return self._math("ARCTAN2", y, x)
+
+    def multiply_add(self, a, s, c):
+        """a · s + c in one node (Math or Vector Math Multiply Add)."""
+        if "color" in (_kind(a), _kind(c)):
+            return self._vector("MULTIPLY_ADD", _as_color(a), s, _as_color(c))
+        return self._math("MULTIPLY_ADD", a, s, c)
+
+    def channel(self, color, i: int):
+        sep = self._node("ShaderNodeSeparateXYZ", _depth(color))
+        self._link_or_set(color, sep.inputs[0])
+        return NodeValue(self, sep.outputs[i], "float", _depth(color))
+
+    def channel_mean(self, color):
+        return self._vector("DOT_PRODUCT", _as_color(color), (1.0 / 3.0,) * 3, out="Value")
+
+    def rotated_tangent(self, angle):
+        """The Geometry node's tangent turned by ``angle`` about the normal: cos·T + sin·(N × T)."""
+        n = self.normal()
+        t = NodeValue(self, self.geometry()[2], "color", 1)
+        return self.scale(t, self.cos(angle)) + self.scale(self._vector("CROSS_PRODUCT", n, t), self.sin(angle))
+
+    @staticmethod
+    def has_metal() -> bool:
+        return hasattr(bpy.types, "ShaderNodeBsdfMetallic")
+
     def step_below(self, x, edge):
         return self._math("LESS_THAN", x, edge)
 
@@ -275,10 +306,33 @@ class NodeBackend:
         if alpha_x is alpha_y:
             inputs["Roughness"] = self._roughness(alpha_x)
         else:
-            inputs["Roughness"] = self.sqrt(self.sqrt(alpha_x * alpha_y))
-            inputs["Anisotropy"] = 1.0 - self.sqrt(alpha_x / alpha_y)
-            inputs["Tangent"] = tangent
+            inputs.update(self._anisotropic(alpha_x, alpha_y, tangent))
         self._closure("ShaderNodeBsdfGlossy", inputs, distribution="GGX")
+
+    def _anisotropic(self, alpha_x, alpha_y, tangent) -> dict:
+        """Roughness, Anisotropy and Tangent inputs for α_x ≤ α_y along ``tangent`` (``glossy``)."""
+        return {"Roughness": self.sqrt(self.sqrt(alpha_x * alpha_y)),
+                "Anisotropy": 1.0 - self.sqrt(alpha_x / alpha_y), "Tangent": tangent}
+
+    metal_min_ratio = METAL_MIN_RATIO
+
+    def metal(self, alpha_x, alpha_y, tangent, eta, k, weight=1.0):
+        """Blender 4.3+'s Metallic BSDF (GGX, physical conductor) through a Mix Shader of factor ``weight`` (see
+        ``expr.NumpyBackend.metal``). With roughness r and anisotropy a it has α = r² / s along its Tangent and r² s
+        across, s² = 1 − 0.9a ≥ ``METAL_MIN_RATIO`` (Cycles' svm_node_closure_bsdf): its Tangent is our bitangent
+        N × T (α_y, the larger), s² = α_x / α_y, r² = α_y s."""
+        ratio = self.maximum(alpha_x / alpha_y, METAL_MIN_RATIO)
+        inputs = {"IOR": eta, "Extinction": k, "Roughness": self.sqrt(alpha_y * self.sqrt(ratio)),
+                  "Anisotropy": (1.0 - ratio) * (1.0 / (1.0 - METAL_MIN_RATIO)),
+                  "Tangent": self._vector("CROSS_PRODUCT", self.normal(), tangent)}
+        depth = _depth(weight, *inputs.values()) + 1
+        metal = self._node("ShaderNodeBsdfMetallic", depth, distribution="GGX", fresnel_type="PHYSICAL_CONDUCTOR")
+        for name, value in inputs.items():
+            self._link_or_set(value, metal.inputs[name])
+        mix = self._node("ShaderNodeMixShader", depth + 1)
+        self._link_or_set(weight, mix.inputs["Fac"])
+        self.links.new(metal.outputs[0], mix.inputs[2])
+        self._add(mix.outputs[0], depth + 1)
 
     def diffuse(self, color):
         self._closure("ShaderNodeBsdfDiffuse", {"Color": color})

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import bpy
 
-from ..models import MODELS, micrograin, thin_coat
+from ..models import MODELS, aniso_stack, micrograin, thin_coat
 from ..nodes import material as lamina_material
 from ..nodes import wrap
 from ..operators import compare_run, material_ops
@@ -39,6 +39,8 @@ class LAMINA_PT_main(bpy.types.Panel):
             _draw_micrograin(box, mat)
         elif info["model"] == thin_coat.ID:
             _draw_thin_coat(box, mat)
+        elif info["model"] == aniso_stack.ID:
+            _draw_aniso_stack(box, mat)
         else:
             box.label(text=f"{mat.name}: {info['model']}, {len(info['params']['layers'])} layer(s)")
         row = box.row(align=True)
@@ -53,6 +55,9 @@ class LAMINA_PT_main(bpy.types.Panel):
             return
         if info["model"] == thin_coat.ID:
             box.label(text="Edit the coat and the base on the Lamina node", icon="NODE")
+            return
+        if info["model"] == aniso_stack.ID:
+            box.label(text="Edit the roughnesses, rotations and media on the Lamina node", icon="NODE")
             return
         box.label(text="Edit the layer parameters on the Lamina node", icon="NODE")
         if hasattr(MODELS[info["model"]], "MS_MAX_LAYERS"):
@@ -91,6 +96,33 @@ def _draw_micrograin(box, mat) -> None:
     else:
         bulk = getattr(MODELS.get(p.bulk.type), "LABEL", p.bulk.type)
         col.label(text=f"Bulk: {bulk} (node {lamina_material.BULK_NODE})")
+
+
+def _draw_aniso_stack(box, mat) -> None:
+    """An anisotropic stack's summary from the Lamina node's current inputs: one line per interface (type, IOR,
+    roughnesses, rotation) and per non-empty medium, and which inputs textures drive."""
+    try:
+        model_id, p = lamina_material.current_params(mat)
+    except Exception as e:  # noqa: BLE001 - a hand-edited node tree: say so instead of failing to draw
+        box.label(text=f"{mat.name}: anisotropic stack")
+        box.label(text=f"Cannot read the Lamina node: {e}", icon="ERROR")
+        return
+    box.label(text=f"{mat.name}: anisotropic stack of {len(p.interfaces)} interface(s)")
+    node = lamina_material.shader_node(mat)
+    driven = {s.name for s in _linked_sockets(node, model_id, p)}
+    col = box.column(align=True)
+    for j, interface in enumerate(p.interfaces):
+        ior = "/".join(f"{n:.3g}" for n in sorted(set(interface.ior)))
+        if interface.type == "conductor":
+            ior = ", ".join(f"{n:.3g}+{k:.3g}i" for n, k in zip(interface.ior, interface.k))
+        col.label(text=f"{j + 1}. {aniso_stack.INTERFACE_LABELS[interface.type]} {ior}: α {interface.alpha_x:.3g} × "
+                       f"{interface.alpha_y:.3g}, rotation {interface.rotation:.0f}°")
+        if j < len(p.media) and (p.media[j].depth > 0.0):
+            m = p.media[j]
+            col.label(text=f"   medium: σa·d {', '.join(f'{a * m.depth:.3g}' for a in m.sigma_a)}"
+                           + (f", scattering g {m.g:.2f}" if any(m.sigma_s) else ""))
+    if driven:
+        col.label(text=f"Texture-driven: {', '.join(sorted(driven))}")
 
 
 def _linked_sockets(node, model_id: str, p) -> list:
