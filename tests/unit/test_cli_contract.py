@@ -37,11 +37,24 @@ def fixtures(tmp_path_factory):
     (folder / "broken.json").write_text('{"layers": [')
     (folder / "coat.json").write_text(json.dumps({"bounces": 1.5}))
     (folder / "grains.json").write_text(json.dumps({"filling_factor": 0.3, "grain": {"type": "velvet"}}))
+    for name, data in ANISO_BAD.items():
+        (folder / f"{name}.json").write_text(json.dumps(data))
     (folder / "results").mkdir()
     (folder / "results" / "report.json").write_text("{}")  # earlier results
     (folder / "empty").mkdir()
     return folder
 
+
+# Anisotropic stacks the declaration refuses (addon/models/aniso_stack.py).
+DIELECTRIC, CONDUCTOR = {"type": "dielectric", "ior": 1.5}, {"type": "conductor"}
+ANISO_BAD = {
+    "aniso_conductor_first": {"interfaces": [CONDUCTOR, DIELECTRIC]},
+    "aniso_five": {"interfaces": [DIELECTRIC] * 5},
+    "aniso_ior_zero": {"interfaces": [{"type": "dielectric", "ior": 0.0}]},
+    "aniso_negative_k": {"interfaces": [{"type": "conductor", "k": [-1.0, 0.0, 0.0]}]},
+    "aniso_media_count": {"interfaces": [DIELECTRIC, CONDUCTOR], "media": [{}, {}]},
+    "aniso_unknown_key": {"layers": []},
+}
 
 MAKE = ("make-material", "--preset", "plastic")
 COMPARE = ("compare", "--preset", "plastic", "--forms", "nodes", "--scenes", "sphere")
@@ -78,6 +91,18 @@ REFUSALS = [
     (MAKE + ("--out", "text.txt/x.blend"), "is a file, not a folder"),
     (MAKE + ("--out", "/proc/x.blend"), "cannot write in /proc"),
     (MAKE + ("--out", "x.txt"), "--out 'x.txt': expected a file name ending in .blend"),
+    (("make-material", "--model", "aniso_stack", "--json", "aniso_conductor_first.json", "--out", "x.blend"),
+     "interface 1 is a conductor: a conductor ends the stack"),
+    (("make-material", "--model", "aniso_stack", "--json", "aniso_five.json", "--out", "x.blend"),
+     "expected a list of 1 to 4 interfaces, got 5"),
+    (("make-material", "--model", "aniso_stack", "--json", "aniso_ior_zero.json", "--out", "x.blend"),
+     "interface 1: ior: 0.0 must be > 0"),
+    (("make-material", "--model", "aniso_stack", "--json", "aniso_negative_k.json", "--out", "x.blend"),
+     "interface 1: k: [-1.0, 0.0, 0.0] must be ≥ 0"),
+    (("make-material", "--model", "aniso_stack", "--json", "aniso_media_count.json", "--out", "x.blend"),
+     "media: expected 1"),
+    (("compare", "--model", "aniso_stack", "--json", "aniso_unknown_key.json", "--out", "x"), "unknown key(s) layers"),
+    (("compare", "--model", "aniso_stack", "--preset", "velvet", "--out", "x"), "unknown aniso_stack preset 'velvet'"),
     # compare
     (COMPARE + ("--out", ""), "--out is empty"),
     (COMPARE + ("--out", "text.txt"), "--out 'text.txt' is a file; expected a folder"),
