@@ -5,8 +5,10 @@ here it runs on the expression backend through ``StackOps``, and each lobe becom
 depends on the view only (research notes §4, §6):
 
 * the top interface: Cycles' anisotropic GGX conductor with the exact Fresnel per microfacet at its (αx, αy,
-  tangent) — OSL ``conductor_bsdf``, node groups the Metallic BSDF (physical conductor); a dielectric top is a
-  conductor of extinction 0, whose Fresnel is the dielectric one. This is the reference's surface lobe exactly.
+  tangent) — OSL ``conductor_bsdf`` (a dielectric top: ``dielectric_bsdf`` without transmission), node groups the
+  Metallic BSDF (physical conductor; a dielectric is a conductor of extinction 0, whose Fresnel is the dielectric
+  one). This is the reference's surface lobe exactly; but Blender 4.2's OSL ``conductor_bsdf`` approximates the
+  conductor Fresnel (measured 1% off for a metal of k ≈ 2-4 on the plane, far more for k near 0): not predicted.
   Blender 4.2 has no Metallic BSDF node: its node group renders a Fresnel-free Glossy BSDF whose colour is the
   lobe's mean Fresnel FGD / E at the isotropic equivalent roughness. [approx: top-fresnel-mean-blender-4.2] Later
   node groups do so where αx / αy < 0.1, which the Metallic BSDF's anisotropy cannot reach (a Mix Shader picks
