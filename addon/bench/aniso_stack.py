@@ -23,7 +23,7 @@ from ..models.micrograin import CONDUCTORS
 from ..reference import aniso_stack as reference
 from ..reference import aniso_stack_truth as truth
 from ..reference.frames import spherical
-from .common import fastest_renders, pct, reference_throughput, timed
+from .common import pct, preset_render_times, reference_throughput, timed
 
 MODEL = model.ID
 GRID_STACKS = 200
@@ -201,18 +201,6 @@ def sample_cost(n: int = 20000, repeats: int = 3) -> dict:
     return {"model": model_s, "truth": (time.perf_counter() - t0) / n}
 
 
-def render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
-    """Cycles render time of each preset as node group, OSL and the Principled BSDF set up from it."""
-    from ..nodes import material as lamina_material
-
-    def materials(name):
-        p = model.params_from_dict(presets.load(MODEL, name))
-        return {**{form: lamina_material.new_material(MODEL, p, form) for form in ("nodes", "osl")},
-                "principled": lamina_material.principled_material(MODEL, p)}
-
-    return fastest_renders(presets.names(MODEL), materials, samples, resolution, repeats)
-
-
 def speed(sizes) -> str:
     """The anisotropic-stack sections of docs/benchmarks.md (``bench.Sizes``)."""
     two = model.params_from_dict({})
@@ -235,7 +223,7 @@ def speed(sizes) -> str:
               "(anisotropic metal + coat; goal for 2-interface stacks: node group ≤ 1.2×):", "",
               "| preset | interfaces | node group s | OSL s | Principled s | node group : Principled | "
               "OSL : Principled |", "|---|---|---|---|---|---|---|"]
-    for r in render_times(sizes.timing_samples, sizes.timing_resolution):
+    for r in preset_render_times(MODEL, sizes.timing_samples, sizes.timing_resolution):
         count = len(presets.load(MODEL, r["preset"])["interfaces"])
         lines.append(f"| {r['preset']} | {count} | {r['nodes']:.2f} | {r['osl']:.2f} | {r['principled']:.2f} | "
                      f"{r['nodes'] / r['principled']:.2f} | {r['osl'] / r['principled']:.2f} |")

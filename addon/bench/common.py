@@ -112,3 +112,17 @@ def fastest_renders(names, materials_of, samples: int, resolution: int, repeats:
 
 def pct(x: float) -> str:
     return f"{100 * x:.1f}%" if np.isfinite(x) else "n/a"
+
+
+def preset_render_times(model_id: str, samples: int, resolution: int, repeats: int = 3) -> list[dict]:
+    """Cycles render time of each of the model's presets as node group, OSL and its Principled BSDF
+    (``principled_settings``: about the same lobe count, or the same material where the model has a counterpart)."""
+    from ..models import MODELS
+    from ..nodes import material as lamina_material
+
+    def materials(name):
+        p = MODELS[model_id].params_from_dict(presets.load(model_id, name))
+        return {**{form: lamina_material.new_material(model_id, p, form) for form in ("nodes", "osl")},
+                "principled": lamina_material.principled_material(model_id, p)}
+
+    return fastest_renders(presets.names(model_id), materials, samples, resolution, repeats)

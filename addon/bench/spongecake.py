@@ -16,8 +16,8 @@ from ..nodes import spongecake as mapping
 from ..reference import metrics
 from ..reference import scenes as ref_scenes
 from ..reference import spongecake as reference
-from .common import (ACCURACY_SCENES, approximation_rows, comparison_scenes, fastest_renders, mapping_errors, pct,
-                     reference_throughput, timed)
+from .common import (ACCURACY_SCENES, approximation_rows, comparison_scenes, mapping_errors, pct,
+                     preset_render_times, reference_throughput, timed)
 
 MODEL = model.ID
 
@@ -34,18 +34,6 @@ def ground_truth_error(p, n_dirs: int = 4, n_paths: int = 20000, seed: int = 1) 
     single, _ = reference.ground_truth(p, wi, wo, n_paths=n_paths, seed=seed)
     analytic = reference.eval(p, wi, wo)
     return float(np.abs(analytic - single).mean() / np.abs(single).mean())
-
-
-def render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
-    """Cycles render time of each preset as node group, OSL and a Principled BSDF with a similar lobe count."""
-    from ..nodes import material as lamina_material
-
-    def materials(name):
-        p = model.params_from_dict(presets.load(MODEL, name))
-        return {**{form: lamina_material.new_material(MODEL, p, form) for form in ("nodes", "osl")},
-                "principled": lamina_material.principled_material(MODEL, p)}
-
-    return fastest_renders(presets.names(MODEL), materials, samples, resolution, repeats)
 
 
 # ------------------------------------------------------------------------------------------------ docs
@@ -100,7 +88,7 @@ def _short(config: dict) -> str:
 def benchmarks_markdown(samples: int, resolution: int) -> str:
     fabric = model.params_from_dict(presets.load(MODEL, "fabric"))
     rate = reference_throughput(fabric, MODEL)
-    rows = render_times(samples, resolution)
+    rows = preset_render_times(MODEL, samples, resolution)
     lines = ["## SpongeCake", "",
              f"Reference `spongecake.eval`, 2-layer fabric, float64: **{rate / 1e6:.2f} M evals/s**.", "",
              f"Cycles CPU render of the sphere scene, {resolution}×{resolution} px, {samples} samples, fastest of "

@@ -16,7 +16,8 @@ from ..reference import thin_coat as reference
 from ..reference import thin_coat_truth as truth
 from ..reference import vmf, warping
 from ..reference.frames import spherical
-from .common import approximation_rows, fastest_renders, pct, preset_rows, reference_throughput, timed
+from .common import (approximation_rows, fastest_renders, pct, preset_render_times, preset_rows, reference_throughput,
+                     timed)
 
 MODEL = model.ID
 # The issue's grid: κ1, κ2 ∈ {10, 1e3, 1e6}, η ∈ {1.2, 1.5, 2}, without and with absorption.
@@ -286,19 +287,6 @@ def render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
     return fastest_renders(range(model.MAX_BOUNCES + 1), materials, samples, resolution, repeats)
 
 
-def preset_render_times(samples: int, resolution: int, repeats: int = 3) -> list[dict]:
-    """Cycles render time of each preset as node group, OSL and a Principled BSDF coat of the same roughness and
-    IOR (``nodes.principled_coat``, what an artist would otherwise use)."""
-    from ..nodes import material as lamina_material
-
-    def materials(name):
-        p = model.params_from_dict(presets.load(MODEL, name))
-        return {**{form: lamina_material.new_material(MODEL, p, form) for form in ("nodes", "osl")},
-                "principled": lamina_material.principled_material(MODEL, p)}
-
-    return fastest_renders(presets.names(MODEL), materials, samples, resolution, repeats)
-
-
 def speed_markdown(samples: int, resolution: int) -> str:
     rate = reference_throughput(model.params_from_dict(presets.load(MODEL, "varnished_metal")), MODEL)
     lines = ["", "## Thin transparent coat (ENDF)", "",
@@ -326,7 +314,7 @@ def speed_markdown(samples: int, resolution: int) -> str:
               "coat of the same roughness and IOR.", "",
               "| preset | node group s | OSL s | Principled coat s | node group : Principled | OSL : Principled |",
               "|---|---|---|---|---|---|"]
-    for r in preset_render_times(samples, resolution):
+    for r in preset_render_times(MODEL, samples, resolution):
         lines.append(f"| {r['preset']} | {r['nodes']:.2f} | {r['osl']:.2f} | {r['principled']:.2f} | "
                      f"{r['nodes'] / r['principled']:.2f} | {r['osl'] / r['principled']:.2f} |")
     return "\n".join(lines) + "\n"
