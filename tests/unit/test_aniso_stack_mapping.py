@@ -96,7 +96,7 @@ def test_structure_is_the_interface_types_and_iors_and_the_media_scattering():
 
 
 def test_demo_presets_are_marked():
-    assert presets.demo_names(model.ID) == ["metallic_paint", "rough_tangents_90"]
+    assert presets.demo_names(model.ID) == ["metallic_paint"]  # one stack keeps make demo near 8 minutes
 
 
 def test_approximations_have_isolating_configs_and_are_named_where_used():
