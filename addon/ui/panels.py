@@ -101,12 +101,10 @@ def _draw_micrograin(box, mat) -> None:
 def _draw_aniso_stack(box, mat) -> None:
     """An anisotropic stack's summary from the Lamina node's current inputs: one line per interface (type, IOR,
     roughnesses, rotation) and per non-empty medium, and which inputs textures drive."""
-    try:
-        model_id, p = lamina_material.current_params(mat)
-    except Exception as e:  # noqa: BLE001 - a hand-edited node tree: say so instead of failing to draw
-        box.label(text=f"{mat.name}: anisotropic stack")
-        box.label(text=f"Cannot read the Lamina node: {e}", icon="ERROR")
+    read = _current_params(box, mat, "anisotropic stack")
+    if read is None:
         return
+    model_id, p = read
     box.label(text=f"{mat.name}: anisotropic stack of {len(p.interfaces)} interface(s)")
     node = lamina_material.shader_node(mat)
     driven = {s.name for s in _linked_sockets(node, model_id, p)}
@@ -125,6 +123,16 @@ def _draw_aniso_stack(box, mat) -> None:
         col.label(text=f"Texture-driven: {', '.join(sorted(driven))}")
 
 
+def _current_params(box, mat, what: str):
+    """(model id, parameters) of ``mat``, or None after saying in ``box`` that its Lamina node cannot be read."""
+    try:
+        return lamina_material.current_params(mat)
+    except Exception as e:  # noqa: BLE001 - a hand-edited node tree: say so instead of failing to draw
+        box.label(text=f"{mat.name}: {what}")
+        box.label(text=f"Cannot read the Lamina node: {e}", icon="ERROR")
+        return None
+
+
 def _linked_sockets(node, model_id: str, p) -> list:
     """The Lamina node's sockets (the mapping's ``Socket``: name and declared ``param``) that a link drives."""
     from ..nodes import MAPPINGS
@@ -137,12 +145,10 @@ def _linked_sockets(node, model_id: str, p) -> list:
 def _draw_thin_coat(box, mat) -> None:
     """A thin coat's summary from the Lamina node's current inputs: base, both interfaces' roughness and κ, η,
     the absorption σa·d, the bounces, and which inputs textures drive."""
-    try:
-        model_id, p = lamina_material.current_params(mat)
-    except Exception as e:  # noqa: BLE001 - a hand-edited node tree: say so instead of failing to draw
-        box.label(text=f"{mat.name}: thin coat")
-        box.label(text=f"Cannot read the Lamina node: {e}", icon="ERROR")
+    read = _current_params(box, mat, "thin coat")
+    if read is None:
         return
+    model_id, p = read
     box.label(text=f"{mat.name}: thin coat over {thin_coat.BASE_LABELS[p.base.type].lower()}")
     node = lamina_material.shader_node(mat)
     if node is None:
