@@ -365,11 +365,12 @@ def _porous_dict(args) -> tuple[dict, list[str]]:
 def cmd_add_porous(args) -> int:
     data, printed = _porous_dict(args)
     blend, out = _blend_paths(args)
-    from .operators import blend_io, material_ops
+    from .operators import blend_io
+    from .operators import micrograin as porous
 
     try:
-        summary, warnings = material_ops.add_porous_file(blend, args.material, data, args.form, out, args.preset)
-    except (blend_io.BlendArgumentError, material_ops.PorousError) as e:  # nothing was written
+        summary, warnings = porous.add_porous_file(blend, args.material, data, args.form, out, args.preset)
+    except (blend_io.BlendArgumentError, porous.PorousError) as e:  # nothing was written
         raise CliError(str(e)) from None
     _warn(warnings, already=printed)
     print(f"lamina: {summary}; wrote {out}")

@@ -33,6 +33,7 @@ MAX_INTERFACES = 4
 MIN_ALPHA = 1e-4
 INTERFACE_TYPES = ("dielectric", "conductor")
 INTERFACE_LABELS = {"dielectric": "Dielectric", "conductor": "Conductor"}
+GLOSSY_MAX_ANISOTROPY = 0.99  # Blender's Glossy BSDF clamps its Anisotropy to ±0.99
 
 ROUGHNESS = (
     Param("alpha_x", "Alpha X", "float", 0.1, MIN_ALPHA, 1.0, texturable=True, subtype="FACTOR",
@@ -152,6 +153,23 @@ def validate(data: dict) -> Validated:
 def params_from_dict(data: dict) -> Params:
     """The Python API entry point: an Anisotropic Stack dict (docs/api.md) to reference parameters."""
     return validate(data).params
+
+
+def alpha_from_glossy(roughness: float, anisotropy: float) -> tuple[float, float]:
+    """(αx, αy) of Blender's Glossy BSDF at Roughness r and Anisotropy a (its OSL and SVM code, Blender 4.2 to 5.0):
+    α = r², a clamped to ±0.99; a ≥ 0 stretches the highlight across the tangent (αx = α(1 − a), αy = α / (1 − a)),
+    a < 0 along it (αx = α / (1 + a), αy = α(1 + a))."""
+    alpha = min(max(roughness, 0.0), 1.0) ** 2
+    a = min(max(anisotropy, -GLOSSY_MAX_ANISOTROPY), GLOSSY_MAX_ANISOTROPY)
+    return (alpha * (1.0 - a), alpha / (1.0 - a)) if a >= 0.0 else (alpha / (1.0 + a), alpha * (1.0 + a))
+
+
+def glossy_from_alpha(alpha_x: float, alpha_y: float) -> tuple[float, float]:
+    """The inverse of ``alpha_from_glossy``: (Roughness, Anisotropy) with r⁴ = αx·αy and the aspect sqrt(αx / αy)
+    (an anisotropy beyond ±0.99, αx/αy outside [1/39601, 39601], is clamped there)."""
+    roughness = (alpha_x * alpha_y) ** 0.25
+    a = 1.0 - math.sqrt(alpha_x / alpha_y) if alpha_x <= alpha_y else math.sqrt(alpha_y / alpha_x) - 1.0
+    return roughness, min(max(a, -GLOSSY_MAX_ANISOTROPY), GLOSSY_MAX_ANISOTROPY)
 
 
 def default_interface(kind: str) -> dict:

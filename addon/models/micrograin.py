@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass
 
 from . import spongecake
+from .metals import METALS
 from .params import METADATA_KEYS, Param, ParamError, Validated, read_fields
 
 ID = "micrograin"
@@ -54,13 +55,9 @@ GRAIN = {
     ),
 }
 
-# Complex IORs (R, G, B at about 650, 550, 450 nm) of conductors (grains, a thin coat's base); values rounded from
-# published tables.
+# Complex IORs (R, G, B at about 650, 550, 450 nm) of what conductor grains are made of: metals and two oxides.
 CONDUCTORS = {
-    "gold": ((0.143, 0.374, 1.442), (3.983, 2.385, 1.603)),
-    "aluminium": ((1.657, 0.880, 0.521), (9.224, 6.270, 4.837)),
-    "copper": ((0.271, 0.677, 1.316), (3.609, 2.625, 2.292)),
-    "silver": ((0.159, 0.145, 0.135), (3.929, 3.190, 2.381)),
+    **{name: METALS[name] for name in ("gold", "aluminium", "copper", "silver")},
     "copper_oxide": ((2.80, 3.00, 2.85), (0.08, 0.25, 0.75)),
     "soot": ((1.75, 1.75, 1.75), (0.45, 0.45, 0.45)),
 }

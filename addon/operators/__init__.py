@@ -1,20 +1,23 @@
-"""Blender operators and the window-manager settings they use."""
+"""Blender operators and the window-manager settings they use. Each model's Add dialog lives in
+``operators/<model id>.py`` (``classes``, and ``ADD``: the panel's button), found through the model registry."""
+import importlib
+
 import bpy
 
+from ..models import MODELS
 from . import bake_ops, compare_op, material_ops, ms_ops
+
+MODEL_OPERATORS = {model_id: importlib.import_module(f".{model_id}", __name__) for model_id in MODELS}
 
 classes = (
     compare_op.LaminaCompareSettings,
-    material_ops.LAMINA_OT_add_spongecake,
-    material_ops.LAMINA_OT_set_form,
-    material_ops.LAMINA_OT_add_porous_layer,
-    material_ops.LAMINA_OT_add_thin_coat,
+    *material_ops.classes,
+    *(cls for module in MODEL_OPERATORS.values() for cls in module.classes),
     ms_ops.LAMINA_OT_set_multiple_scattering,
     ms_ops.LAMINA_OT_rebake,
     compare_op.LAMINA_OT_compare,
     bake_ops.LAMINA_OT_bake_textures,
 )
-
 
 
 def register():

@@ -17,6 +17,7 @@ from addon.operators import ms_ops  # noqa: E402
 from addon.operators.cycles_render import render_cycles  # noqa: E402
 from addon.reference import metrics  # noqa: E402
 from addon.reference import scenes as S  # noqa: E402
+from ui_helpers import panel_text  # noqa: E402
 
 pytestmark = pytest.mark.blender
 # two bright surface layers: much of the light scatters more than once
@@ -182,27 +183,15 @@ def test_energy_share_is_the_furnace_difference():
         material.ms_energy_share(material.new_material(model.ID, _preset("leaf"), "nodes"))
 
 
-def _panel_text(mat):
-    """Everything LAMINA_PT_main draws for ``mat``, as one string."""
-    from addon.ui import panels
-    from test_operators import _Layout
-
-    log = []
-    context = type("Ctx", (), {"material": mat, "scene": bpy.context.scene,
-                               "window_manager": bpy.context.window_manager})()
-    panels.LAMINA_PT_main.draw(type("P", (), {"layout": _Layout(log)})(), context)
-    return " ".join(f"{a} {k.get('text', '')}" for _, a, k in log)
-
-
 def test_panel_shows_toggle_share_stale_warning_and_rebake():
     mat = material.new_material(model.ID, _preset("fabric", multiple_scattering=True), "nodes")
-    text = _panel_text(mat)
+    text = panel_text(mat)
     assert "lamina.set_multiple_scattering" in text and "lamina_auto_rebake" in text and "lamina.rebake" in text
     assert f"Multiple scattering: {material.ms_energy_share(mat):.0%} of the leaving energy" in text
     assert ("lamina.bake_textures" in text) == hasattr(bpy.types, "LAMINA_OT_bake_textures")
     _set_thickness(mat, 3.0)
-    assert "Parameters changed since the last bake" in _panel_text(mat)
-    text = _panel_text(material.new_material(model.ID, _preset("leaf"), "nodes"))
+    assert "Parameters changed since the last bake" in panel_text(mat)
+    text = panel_text(material.new_material(model.ID, _preset("leaf"), "nodes"))
     assert "Multiple scattering needs 1 or 2 layers" in text and "lamina.rebake" not in text
 
 

@@ -5,6 +5,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from addon.nodes import material  # noqa: E402
+from ui_helpers import panel_text  # noqa: E402
 
 pytestmark = pytest.mark.blender
 
@@ -24,7 +25,7 @@ def test_add_material_from_a_preset_keeps_the_users_material(registered, sphere)
 
 
 def test_add_material_from_scratch_builds_the_requested_stack(registered, sphere):
-    assert bpy.ops.lamina.add_spongecake(preset="SCRATCH", layers=3, layer_1="fiber", layer_2="hg",
+    assert bpy.ops.lamina.add_spongecake(preset="CUSTOM", layers=3, layer_1="fiber", layer_2="hg",
                                          layer_3="surface", substrate="diffuse") == {"FINISHED"}
     _, p = material.current_params(sphere.active_material)
     assert [layer.type for layer in p.layers] == ["fiber", "hg", "surface"]
@@ -55,36 +56,13 @@ def test_set_form_and_compare_from_the_operators(registered, sphere):
     assert after == counts
 
 
-class _Layout:
-    """Records what a panel draws (a stand-in for bpy's UILayout, which only exists while Blender draws)."""
-
-    def __init__(self, log):
-        self.log = log
-        self.enabled = True
-
-    def __getattr__(self, name):
-        if name in ("row", "column", "box"):
-            return lambda *a, **k: _Layout(self.log)
-        return lambda *a, **k: self.log.append((name, a, k)) or type("Props", (), {})()
-
-
 @pytest.mark.parametrize("lamina", [False, True])
 def test_panels_draw_for_lamina_and_other_materials(registered, sphere, lamina):
-    from addon.ui import panels
-
     if lamina:
         bpy.ops.lamina.add_spongecake(preset="plastic", form="osl")
     else:
         sphere.data.materials.append(bpy.data.materials.new("plain"))
-    mat = sphere.active_material
-    log = []
-    context = type("Ctx", (), {"material": mat, "scene": bpy.context.scene,
-                               "window_manager": bpy.context.window_manager})()
-    for cls in panels.classes:
-        panel = type("P", (), {"layout": _Layout(log)})()
-        if cls.poll(context) if cls is panels.LAMINA_PT_compare else True:
-            cls.draw(panel, context)
-    labels = " ".join(str(a) for _, a, k in log) + " ".join(str(k.get("text", "")) for _, a, k in log)
+    labels = panel_text(sphere.active_material)
     if lamina:
         assert "lamina.set_form" in labels and "lamina.compare" in labels
         assert "OSL renders only in Cycles with Open Shading Language on" in labels  # factory settings: OSL off

@@ -15,6 +15,7 @@ from addon.nodes import material, wrap  # noqa: E402
 from addon.operators.cycles_render import render_cycles  # noqa: E402
 from addon.reference import metrics  # noqa: E402
 from addon.reference import scenes as S  # noqa: E402
+from ui_helpers import Layout, operators, panel_log  # noqa: E402
 
 pytestmark = pytest.mark.blender
 RED_DUST = {"filling_factor": 0.5, "anfractuosity": 0.5, "grain": {"type": "diffuse", "albedo": [0.9, 0.1, 0.1]}}
@@ -216,33 +217,9 @@ def test_operator_refuses_a_material_with_nothing_to_wrap(registered, sphere):
 # --------------------------------------------------------------------------------------------------- panel
 
 
-class _Layout:
-    """Records what a panel draws and whether it is enabled there (bpy's UILayout exists only while drawing)."""
-
-    def __init__(self, log, parent=None):
-        self.log, self.parent, self.enabled = log, parent, True
-
-    def _on(self):
-        return self.enabled and (self.parent is None or self.parent._on())
-
-    def __getattr__(self, name):
-        if name in ("row", "column", "box"):
-            return lambda *a, **k: _Layout(self.log, self)
-        return lambda *a, **k: self.log.append((name, a, k, self._on())) or type("Props", (), {})()
-
-
 def _draw(mat):
-    from addon.ui import panels
-
-    log = []
-    context = type("Ctx", (), {"material": mat, "scene": bpy.context.scene,
-                               "window_manager": bpy.context.window_manager})()
-    for cls in panels.classes:
-        if cls is panels.LAMINA_PT_main or cls.poll(context):
-            cls.draw(type("P", (), {"layout": _Layout(log)})(), context)
-    texts = " | ".join(str(k.get("text", "")) for _, a, k, _ in log)
-    ops = {a[0]: on for name, a, k, on in log if name == "operator"}
-    return texts, ops
+    log = panel_log(mat)
+    return " | ".join(str(k.get("text", "")) for _, a, k, _ in log), operators(log)
 
 
 def test_panel_summarises_a_porous_layer_and_offers_add_on_other_materials(registered):
@@ -271,10 +248,10 @@ def test_panel_summarises_a_porous_layer_and_offers_add_on_other_materials(regis
     ("CUSTOM", "conductor", "roughness", "CUSTOM"), ("mud_on_plastic", "diffuse", "anfractuosity", "gold")])
 def test_dialog_draws_each_choice(preset, grain_type, control, conductor):
     """The dialog (drawn by Blender only in a UI session): the settings that apply, and the other roughness value."""
-    from addon.operators.material_ops import LAMINA_OT_add_porous_layer as Op
+    from addon.operators.micrograin import LAMINA_OT_add_porous_layer as Op
 
     log = []
-    fields = dict(layout=_Layout(log), preset=preset, filling_factor=0.5, roughness_control=control,
+    fields = dict(layout=Layout(log), preset=preset, filling_factor=0.5, roughness_control=control,
                   anfractuosity=0.5, roughness=0.9, grain_type=grain_type, conductor=conductor)
     op = type("Op", (), {**fields, **{k: getattr(Op, k) for k in ("_other_control", "layer_dict", "_draw_custom")}})()
     Op.draw(op, bpy.context)

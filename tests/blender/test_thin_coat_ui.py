@@ -1,7 +1,6 @@
 """Thin coats as an artist meets them: the Add Thin Coat Material dialog (properties from the declaration, presets,
 Custom with κ beside each roughness, every base), the material it adds and its undo, and the N-panel summary."""
 import math
-from types import SimpleNamespace
 
 import pytest
 
@@ -11,10 +10,13 @@ from addon import presets  # noqa: E402
 from addon.models import thin_coat as model  # noqa: E402
 from addon.nodes import MAPPINGS  # noqa: E402
 from addon.nodes import material  # noqa: E402
+from addon.models.metals import METALS  # noqa: E402
 from addon.operators import material_ops  # noqa: E402
+from addon.operators import thin_coat as dialog_module  # noqa: E402
+from ui_helpers import dialog, draw_dialog, panel_text, text  # noqa: E402
 
 pytestmark = pytest.mark.blender
-OP = material_ops.LAMINA_OT_add_thin_coat
+OP = dialog_module.LAMINA_OT_add_thin_coat
 
 
 @pytest.fixture(autouse=True)
@@ -22,45 +24,12 @@ def clean_file():
     bpy.ops.wm.read_factory_settings(use_empty=True)
 
 
-class _Layout:
-    """Records what a panel or dialog draws (bpy's UILayout only exists while Blender draws)."""
-
-    def __init__(self, log):
-        self.log = log
-        self.enabled = True
-        self.alert = False
-
-    def __getattr__(self, name):
-        if name in ("row", "column", "box", "split"):
-            return lambda *a, **k: _Layout(self.log)
-        return lambda *a, **k: self.log.append((name, a, k)) or type("Props", (), {})()
-
-
-def _text(log) -> str:
-    return "\n".join([str(k.get("text", "")) for _, a, k in log] + [" ".join(map(str, a)) for _, a, k in log])
-
-
 def _dialog(registered, **values):
-    """A stand-in for the operator's properties: the registered defaults, then ``values``."""
-    rna = bpy.ops.lamina.add_thin_coat.get_rna_type().properties
-    defaults = {}
-    for prop in rna:
-        if prop.identifier == "rna_type":
-            continue
-        if prop.type == "FLOAT" and prop.array_length:
-            defaults[prop.identifier] = tuple(prop.default_array)
-        else:
-            defaults[prop.identifier] = prop.default
-    return SimpleNamespace(**{**defaults, **values})
+    return dialog("add_thin_coat", **values)
 
 
 def _draw(ns) -> str:
-    log = []
-    ns.layout = _Layout(log)
-    for name in ("_draw_preset", "_draw_custom", "coat_dict"):
-        setattr(ns, name, getattr(OP, name).__get__(ns))
-    OP.draw(ns, bpy.context)
-    return _text(log)
+    return text(draw_dialog(OP, ns, ("_draw_preset", "_draw_custom", "coat_dict")))
 
 
 def test_the_dialog_properties_come_from_the_declaration(registered):
@@ -94,7 +63,7 @@ def test_custom_settings_make_a_clean_dict_for_every_base(registered, base):
     if base == "diffuse":
         assert "no effect over a diffuse base" in text
     if base == "conductor":
-        assert p.base.eta == pytest.approx(material_ops.METALS["aluminium"][0])
+        assert p.base.eta == pytest.approx(METALS["aluminium"][0])
 
 
 def test_custom_metal_takes_its_complex_ior(registered):
@@ -113,13 +82,13 @@ def test_presets_load_with_their_description_and_the_dialogs_bounces(registered,
     text = _draw(ns)
     p = model.params_from_dict(data)
     assert presets.description(model.ID, name) in text
-    assert material_ops.kappa_text(p.kappa_top) in text and f"η {p.eta:.2f}" in text
+    assert dialog_module.kappa_text(p.kappa_top) in text and f"η {p.eta:.2f}" in text
 
 
 def test_kappa_is_shown_the_way_artists_read_it():
-    assert material_ops.kappa_text(200.0) == "κ 200" and material_ops.kappa_text(2e4) == "κ 20000"
-    assert material_ops.kappa_text(1e6) == "κ 1e+06"
-    assert material_ops.sigma_a_from_color((1.0, 0.0, math.exp(-2.0))) == pytest.approx([0.0, 1000.0, 2.0])
+    assert dialog_module.kappa_text(200.0) == "κ 200" and dialog_module.kappa_text(2e4) == "κ 20000"
+    assert dialog_module.kappa_text(1e6) == "κ 1e+06"
+    assert material_ops.sigma_a_from_color((1.0, 0.0, math.exp(-2.0)), model.LAYER) == pytest.approx([0.0, 1000.0, 2.0])
 
 
 # ------------------------------------------------------------------------------------ with the mapping
@@ -165,24 +134,11 @@ def _same(p, q) -> bool:
     return a.keys() == b.keys() and all(a[k] == pytest.approx(b[k], rel=1e-6) for k in a)
 
 
-def _panel_text(context_material) -> str:
-    from addon.ui import panels
-
-    log = []
-    context = SimpleNamespace(material=context_material, scene=bpy.context.scene,
-                              window_manager=bpy.context.window_manager)
-    for cls in panels.classes:
-        if cls is panels.LAMINA_PT_compare and not cls.poll(context):
-            continue
-        cls.draw(SimpleNamespace(layout=_Layout(log)), context)
-    return _text(log)
-
-
 def test_the_panel_summarises_the_coat_and_names_texture_driven_inputs(registered, sphere):
     assert bpy.ops.lamina.add_thin_coat(preset="glazed_ceramic") == {"FINISHED"}
     mat = sphere.active_material
     p = model.params_from_dict(presets.load(model.ID, "glazed_ceramic"))
-    text = _panel_text(mat)
+    text = panel_text(mat)
     assert "lamina.add_thin_coat" in text and "thin coat over diffuse" in text
     assert f"Top: roughness α {p.roughness_top:.3g} (κ 20000)" in text
     assert "Bottom: no effect over a diffuse base" in text
@@ -193,5 +149,5 @@ def test_the_panel_summarises_the_coat_and_names_texture_driven_inputs(registere
     texturable = next(s for s in MAPPINGS[model.ID].sockets(p) if s.kind != "shader" and s.param.texturable)
     image = mat.node_tree.nodes.new("ShaderNodeTexImage")
     mat.node_tree.links.new(image.outputs["Color"], node.inputs[texturable.name])
-    text = _panel_text(mat)
+    text = panel_text(mat)
     assert f"Texture-driven: {texturable.name}" in text and "texture-driven" in text.split("Texture-driven")[0]
