@@ -14,7 +14,7 @@ import sys
 from . import paths, presets
 from .models import MODELS
 from .models.params import ParamError
-from .nodes import FORMS
+from .nodes import FORMS, principled_models
 from .reference.scenes import KINDS
 
 SCENES = KINDS
@@ -66,8 +66,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="micrograin: also render the reference with the linear mix by the filling factor (Fig. 14) "
                          "and d'Eon et al.'s weighting (Eq. 26), side by side with ours")
     cp.add_argument("--principled", action="store_true",
-                    help="thin_coat: also render Blender's Principled BSDF coat set up from the same parameters "
-                         "and report its error against the reference beside Lamina's")
+                    help=f"{', '.join(principled_models())}: also render Blender's Principled BSDF set up from the "
+                         "same parameters and report its error against the reference beside Lamina's")
     cp.add_argument("--truth", action="store_true",
                     help="thin_coat: also measure the reference and Cycles against a Monte Carlo simulation of the "
                          "coat's light paths at sampled pixels")
@@ -252,7 +252,8 @@ def cmd_compare(args) -> int:
     if args.blends and not compare_run.has_blends(args.model):
         raise CliError(f"--blends: model {args.model} has a single blending weight")
     if args.principled and not compare_run.has_principled(args.model):
-        raise CliError(f"--principled: model {args.model} has no Principled BSDF counterpart (thin_coat has)")
+        raise CliError(f"--principled: model {args.model} has no Principled BSDF counterpart "
+                       f"(models with one: {', '.join(principled_models())})")
     truth = _truth_settings(args) if args.truth else None
     out = _checked(paths.output_folder, "--out", args.out, args.overwrite)
     report = _in_results_folder(out, lambda folder: compare_run.compare_params(

@@ -7,8 +7,9 @@ Blender. A report is ``compare_run.compare_params``'s dict plus what the demo ad
 * ``description``: the preset's description;
 * ``not_applicable``: {scene: why it was not rendered} (an opaque material's backlit scene);
 * ``approximations``: [[name, what it does], ...], the mapping's approximations in use for the preset;
-* ``principled_seconds``: the Cycles time of the model's Principled BSDF (about the same lobe count; thin coats: the
-  coat set up from the same parameters) on the sphere scene, same samples and seed; None without a sphere scene;
+* ``principled_seconds``: the Cycles time of the model's Principled BSDF (about the same lobe count; thin coats and
+  anisotropic stacks: set up from the same parameters) on the sphere scene, same samples and seed; None without a
+  sphere scene;
 * ``seconds``: the wall time of the preset's whole comparison.
 """
 from __future__ import annotations
@@ -213,9 +214,10 @@ def _reading(reports) -> str:
     shown = [s for s in ref_scenes.KINDS if any(s in entries for r in reports for entries in r["forms"].values())]
     notes = "".join(f"<dt>{s}</dt><dd>{html.escape(ref_scenes.NOTES[s])}</dd>" for s in shown)
     return ("<h2>Reading the pictures</h2>"
-            f"<p>Every picture is {' | '.join(PICTURE_PANELS)} (thin coats add Blender's Principled coat and its "
-            "error). Both renders share one exposure. The error maps show |Cycles − reference| (the largest colour "
-            f"channel) as a share of the reference's mean over the object, on one fixed scale everywhere: pale yellow is "
+            f"<p>Every picture is {' | '.join(PICTURE_PANELS)} (models with a like-for-like Principled BSDF "
+            "add it and its error). Both renders share one exposure. The error maps show |Cycles − reference| (the "
+            "largest colour channel) as a share of the reference's mean over the object, on one fixed scale "
+            "everywhere: pale yellow is "
             f"{metrics.HEAT_SCALE:.0%} or more; grey is outside the object.</p>"
             f'<div class="legend" id="heat-legend" data-scale="{metrics.HEAT_SCALE}">'
             f'<div class="ramp" style="background:linear-gradient(to right, {stops})"></div>'
@@ -232,7 +234,7 @@ def _preset(report: dict, accuracy_href: str) -> str:
     widths = [70, 100, 90, 110] + ([120] if principled else []) + [80, 160, None]  # the same in every preset
     head = ("<colgroup>" + "".join(f'<col style="width:{w}px">' if w else "<col>" for w in widths) + "</colgroup>"
             + "<tr><th>scene</th><th>form</th><th>rel. RMSE</th><th>mapping alone</th>"
-            + ("<th>Principled coat rel. RMSE</th>" if principled else "")
+            + (f"<th>{html.escape(panels[2])} rel. RMSE</th>" if principled else "")  # principled_panels' label
             + f"<th>Cycles</th><th>reference</th><th>{html.escape(' | '.join(panels))}</th></tr>")
     rows = []
     rendered = {s for by_scene in report["forms"].values() for s in by_scene}

@@ -20,6 +20,18 @@ def approximations(model_id: str, p) -> list[tuple[str, str]]:
     return out
 
 
+def principled_counterpart(model_id: str):
+    """The mapping's ``PRINCIPLED`` (``principled.Counterpart``: label and one-line mapping) where its Principled BSDF
+    (``principled_settings``) renders the same material, compared beside it (``compare --principled``); None where
+    it only has about the same lobe count (the render-time baseline)."""
+    return getattr(MAPPINGS.get(model_id), "PRINCIPLED", None)
+
+
+def principled_models() -> list[str]:
+    """The model ids whose mapping has a ``principled_counterpart``, in registry order."""
+    return [m for m in MAPPINGS if principled_counterpart(m) is not None]
+
+
 def _backend(model_id: str, p, form: str, wo):
     from .expr import NumpyBackend
 

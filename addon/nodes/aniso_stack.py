@@ -38,6 +38,7 @@ from ..reference import aniso_stack as reference
 from ..reference import aniso_stack_tables as tables
 from ..reference import microfacet
 from .expr import METAL_MIN_RATIO
+from .principled import Counterpart
 from .spongecake import Socket
 from .thin_coat import BackendOps, fresnel_conductor
 
@@ -73,6 +74,16 @@ def approximations_used(p: model.Params) -> list[str]:
     if min(top.alpha) < METAL_MIN_RATIO * max(top.alpha):
         used.add("metal-anisotropy-range")
     return [name for name in APPROXIMATIONS if name in used]
+
+
+# Compared beside the stack (``principled``): ``principled_settings`` in one line.
+PRINCIPLED = Counterpart(
+    "Principled BSDF",
+    "base from the bottom interface seen from the medium above it: a conductor as Metallic 1 with Base Color its exact "
+    "Fresnel reflectance at normal incidence, a dielectric as a black Base Color with IOR the relative IOR (or its "
+    "inverse below 1); Roughness (alpha_x alpha_y)^(1/4), Anisotropic (1 - alpha_min / alpha_max) / 0.9, Anisotropic "
+    "Rotation the larger alpha's direction / 360; more than one interface: Coat Weight 1, Coat IOR the top's mean IOR, "
+    "Coat Roughness sqrt(the top's RMS alpha); the media's absorption and the middle interfaces have no counterpart")
 
 
 def principled_settings(p: model.Params) -> dict:

@@ -1,5 +1,6 @@
 """Blender's Principled BSDF coat set up like a Lamina thin coat: what an artist would otherwise use, rendered
-beside the thin coat in comparisons (``compare --principled``, the compare panel's *Principled coat*).
+beside the thin coat in comparisons (``compare --principled``, the compare panel's *Principled BSDF*; declared by
+``nodes.thin_coat.PRINCIPLED``, whose line is ``MAPPING``).
 
 The mapping (``settings``; every number comes from the thin-coat parameters, nothing is fitted):
 
@@ -36,17 +37,11 @@ import numpy as np
 from ..models import thin_coat
 from ..reference import microfacet
 
-SUPPORTED = (thin_coat.ID,)
 MAPPING = ("Coat Weight 1; Coat Roughness (2 / kappa_top)^(1/4) (GGX alpha = Beckmann alpha = sqrt(2 / kappa), "
            "roughness = sqrt(alpha)); Coat IOR eta; Coat Tint exp(-2 sigma_a depth) (a slab: exp(-sigma_a depth)); "
            "base: diffuse colour (no specular) / metal with the conductor's exact colours at 0 and 82 degrees / "
            "black dielectric of IOR base/eta / glass of IOR eta (slab), Roughness (2 / kappa_bottom)^(1/4)")
 F82_COS = 1.0 / 7.0  # Cycles' F82-tint model pins the metal's colour at cos θ = 1/7 (about 82°)
-
-
-def supports(model_id: str) -> bool:
-    """Whether the model has a Principled coat counterpart to compare with."""
-    return model_id in SUPPORTED
 
 
 def roughness(kappa: float) -> float:

@@ -56,6 +56,7 @@ from ..reference.vmf import INVERSE_BELOW, SERIES_BELOW
 from . import principled_coat
 from .closures_np import rational_beckmann_lambda
 from .expr import MAX_MIX_WEIGHT, fresnel_dielectric
+from .principled import Counterpart
 from .spongecake import Socket
 
 COAT_PANEL = "Coat"
@@ -110,6 +111,10 @@ def approximations_used(p: model.Params) -> list[str]:
     if p.transmits:
         used |= {"transmission-as-refraction", "kappa-without-newton"}
     return [name for name in APPROXIMATIONS if name in used]
+
+
+# Compared beside the coat (``principled``): Blender's Principled BSDF coat, ``principled_coat``.
+PRINCIPLED = Counterpart("Principled coat", principled_coat.MAPPING)
 
 
 def principled_settings(p: model.Params) -> dict:

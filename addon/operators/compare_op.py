@@ -33,12 +33,13 @@ class LaminaCompareSettings(bpy.types.PropertyGroup):
                     "paper's Fig. 14) and with d'Eon et al.'s weighting (Eq. 26), beside the view- and "
                     "light-dependent weight")
     principled: bpy.props.BoolProperty(
-        name="Principled coat", default=True,
-        description="Thin coats: also render Blender's Principled BSDF coat set up from the same roughness, IOR, "
-                    "absorption and base (what you would otherwise use) and measure it against the reference")
+        name="Principled BSDF", default=True,
+        description="Also render Blender's Principled BSDF set up from the same parameters (what you would "
+                    "otherwise use) and measure it against the reference (models whose mapping has one: thin "
+                    "coats, anisotropic stacks)")
     truth: bpy.props.BoolProperty(
         name="Monte Carlo ground truth", default=False,
-        description="Thin coats: also measure the reference, Cycles (and the Principled coat) against a Monte "
+        description="Thin coats: also measure the reference, Cycles (and the Principled BSDF) against a Monte "
                     "Carlo simulation of the coat's light paths at sampled pixels (slower)")
     truth_paths: bpy.props.IntProperty(
         name="Monte Carlo paths", default=2000, min=16, max=1_000_000,

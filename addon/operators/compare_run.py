@@ -9,10 +9,11 @@ single scattering alone (the closed-form reference), SS + MS from the network (t
 rendered by Cycles and by the reference) and SS + MS from Monte Carlo (the closed-form single scattering plus
 the random walk's orders >= 2 at sampled pixels, ``addon.ms_truth``). The entries gain an ``ms`` dict.
 
-Thin coats can also be compared with what an artist would otherwise use, Blender's Principled BSDF coat set up
-from the same parameters (``principled``: ``nodes.principled_coat``; entries gain a ``principled`` dict), and with the
-Monte Carlo ground truth of the coat's light paths at sampled pixels (``truth``: a ``CoatTruth``, when
-``reference.thin_coat_truth`` is installed; entries gain a ``truth`` dict).
+A model whose mapping declares ``PRINCIPLED`` (``nodes.principled.Counterpart``: thin coats, anisotropic stacks) can
+also be compared with what an artist would otherwise use, Blender's Principled BSDF set up from the same parameters
+(``principled``: the mapping's ``principled_settings``; entries gain a ``principled`` dict), and a model with a
+``reference.<model>_truth`` with the Monte Carlo ground truth of its light paths at sampled pixels (``truth``: a
+``CoatTruth``; entries gain a ``truth`` dict).
 """
 from __future__ import annotations
 
@@ -27,9 +28,8 @@ import numpy as np
 from .. import ms_truth
 from ..bake.exr import atomic_path, read_exr, write_exr, write_png
 from ..models import MODELS
+from ..nodes import MAPPINGS, predicted_image, principled_counterpart
 from ..nodes import material as lamina_material
-from ..nodes import predicted_image
-from ..nodes import principled_coat as principled_mapping
 from ..reference import metrics
 from ..reference import scenes as ref_scenes
 from . import blend_io, compare_core
@@ -67,9 +67,12 @@ def has_blends(model_id: str) -> bool:
 
 
 def has_principled(model_id: str) -> bool:
-    """Whether the model's Principled BSDF (``principled_settings``) renders the same material, to be compared beside
-    it (thin coats: ``nodes.principled_coat``); the others' only has about the same lobe count."""
-    return principled_mapping.supports(model_id)
+    return principled_counterpart(model_id) is not None
+
+
+def principled_settings(model_id: str, p) -> dict:
+    """The mapping's Principled BSDF inputs for ``p`` as JSON values (tuples as lists)."""
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in MAPPINGS[model_id].principled_settings(p).items()}
 
 
 def truth_module(model_id: str):
@@ -136,7 +139,7 @@ def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_
     τ0 of the paper's Fig. 14 and d'Eon et al.'s weighting, Eq. 26) beside ours (``blend_comparison``).
     ``ms``: compare with multiple scattering (module docstring). A material whose flag is off is compared
     through a temporary copy with the flag on, removed again afterwards.
-    ``principled``: also render Blender's Principled coat set up from the parameters (``principled_comparison``);
+    ``principled``: also render Blender's Principled BSDF set up from the parameters (``principled_comparison``);
     ``truth``: also measure against the Monte Carlo ground truth at sampled pixels (``truth_comparison``)."""
     model_id, p = lamina_material.current_params(mat)
     if ms is not None and not p.multiple_scattering:
@@ -180,12 +183,12 @@ def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_
 
 def principled_comparison(model_id: str, p, spec, cycles, reference, samples: int, seed: int, out_dir: str,
                           cache: dict) -> dict:
-    """Blender's Principled BSDF coat set up from ``p`` (``nodes.principled_coat.settings``), rendered by Cycles on the
+    """Blender's Principled BSDF set up from ``p`` (the mapping's ``principled_settings``), rendered by Cycles on the
     same scene with the same samples and seed (once per scene: it does not depend on the form), against the
     reference: its relative RMSE beside the form's, ``<scene>_principled.exr`` and ``<scene>_principled.png`` =
-    Lamina (Cycles) | reference | Principled coat | error Lamina | error Principled (one exposure, one heat
-    scale)."""
-    if not has_principled(model_id):
+    ``principled_panels`` (one exposure, one heat scale)."""
+    counterpart = principled_counterpart(model_id)
+    if counterpart is None:
         raise ValueError(f"{model_id} has no Principled BSDF counterpart")
     stem = compare_core.safe_file_stem(spec.name)
     files = {"principled": os.path.join(out_dir, f"{stem}_principled.exr"),
@@ -196,7 +199,7 @@ def principled_comparison(model_id: str, p, spec, cycles, reference, samples: in
 
         before = blend_io.snapshot()
         try:
-            mat = lamina_material.principled_material(model_id, p, name="Lamina compare Principled coat")
+            mat = lamina_material.principled_material(model_id, p, name=f"Lamina compare {counterpart.label}")
             cache[key] = render_cycles(mat, spec, samples, seed, files["principled"])
         finally:
             blend_io.remove_new_data(before)
@@ -210,13 +213,16 @@ def principled_comparison(model_id: str, p, spec, cycles, reference, samples: in
         "max_abs_error": metrics.max_abs_error(image, reference, mask),
         "lamina_rel_rmse": metrics.rel_rmse(cycles, reference, mask),
         "cycles_seconds": seconds,
-        "settings": {k: list(v) if isinstance(v, tuple) else v for k, v in principled_mapping.settings(p).items()},
-        "panels": list(PRINCIPLED_PANELS),
+        "settings": principled_settings(model_id, p),
+        "label": counterpart.label,
+        "panels": list(principled_panels(counterpart.label)),
         "files": files,
     }
 
 
-PRINCIPLED_PANELS = ("Lamina (Cycles)", "reference", "Principled coat", "error Lamina", "error Principled")
+def principled_panels(label: str) -> tuple[str, ...]:
+    """The Principled picture's panels; ``label`` (the mapping's ``PRINCIPLED.label``) is the third."""
+    return "Lamina (Cycles)", "reference", label, "error Lamina", "error Principled"
 
 
 def comparison_picture(images, reference, mask, heat_mask=None, gap: int = 2) -> np.ndarray:
@@ -287,7 +293,7 @@ TRUTH_PANELS = ("Lamina (Cycles)", "reference", "Monte Carlo", "error Lamina", "
 
 def truth_comparison(model_id: str, p, spec, cycles, reference, settings: CoatTruth, out_dir: str, cache: dict,
                      principled=None) -> dict:
-    """The form (Cycles), the analytic reference and (given) the Principled coat against the Monte Carlo ground
+    """The form (Cycles), the analytic reference and (given) the Principled BSDF against the Monte Carlo ground
     truth of the same light paths (``coat_truth_image``; the same number of bounces), over its sampled pixels:
     relative RMSEs, its noise on the same scale, ``<scene>_ground_truth.exr`` and ``<scene>_truth.png``
     (``TRUTH_PANELS``: error maps over the sampled pixels)."""
@@ -428,9 +434,11 @@ def compare_params(model_id: str, p, forms, scenes, samples: int, resolution: in
         report["ms"] = {"paths": ms.paths, "albedo_paths": ms.albedo_paths, "stride": ms.stride,
                         "max_depth": ms.max_depth, "seed": ms.seed}
     if principled:
-        report["principled"] = {"settings": {k: list(v) if isinstance(v, tuple) else v
-                                             for k, v in principled_mapping.settings(p).items()},
-                                "mapping": principled_mapping.MAPPING}
+        counterpart = principled_counterpart(model_id)
+        if counterpart is None:
+            raise ValueError(f"{model_id} has no Principled BSDF counterpart")
+        report["principled"] = {"label": counterpart.label, "settings": principled_settings(model_id, p),
+                                "mapping": counterpart.mapping}
     if truth is not None:
         report["truth"] = {"paths": truth.paths, "stride": truth.stride, "seed": truth.seed}
     references = {}
@@ -475,8 +483,8 @@ def scene_lines(entries: dict) -> list[str]:
             others = e["blends"]["vs_ours"].items()
             lines.append("  other blends vs ours: " + ", ".join(f"{b} {d:.2%}" for b, d in others))
         if "principled" in e:
-            lines.append(f"  Principled coat vs reference: rel. RMSE {e['principled']['rel_rmse']:.2%} (Lamina "
-                         f"{e['rel_rmse']:.2%})")
+            pr = e["principled"]
+            lines.append(f"  {pr['label']} vs reference: rel. RMSE {pr['rel_rmse']:.2%} (Lamina {e['rel_rmse']:.2%})")
         if "truth" in e:
             lines.append("  " + truth_line(e["truth"]))
     return lines

@@ -72,8 +72,8 @@ def run_preset(model_id: str, name: str, forms, scenes, samples: int, resolution
 
 def principled_seconds(model_id: str, p, report: dict, resolution: int, folder: str) -> float | None:
     """The Cycles time of the model's Principled BSDF (``principled_settings``) on ``demo_page.TIMED_SCENE`` with
-    the report's samples and seed (None when that scene was not rendered). A thin coat's comparison rendered it
-    already, beside the coat."""
+    the report's samples and seed (None when that scene was not rendered). A comparison with the mapping's
+    Principled counterpart (``compare_run.has_principled``) rendered it already."""
     entry = next(iter(report["forms"].values()), {}).get(demo_page.TIMED_SCENE)
     if entry is None:
         return None

@@ -8,7 +8,7 @@ import pytest
 
 from addon import presets
 from addon.models import aniso_stack as model
-from addon.nodes import MAPPINGS, expr, predicted_image
+from addon.nodes import MAPPINGS, expr, predicted_image, principled_counterpart, principled_models
 from addon.nodes import aniso_stack as mapping
 from addon.reference import aniso_stack as reference
 from addon.reference import metrics, scenes
@@ -113,6 +113,16 @@ def test_principled_settings_use_the_stack_interfaces():
     assert s["Base Color"][0] > s["Base Color"][2]  # gold
     alone = mapping.principled_settings(_params({"interfaces": [{"type": "dielectric", "ior": 1.5}], "media": []}))
     assert "Coat Weight" not in alone and alone["IOR"] == pytest.approx(1.5)
+
+
+def test_the_principled_bsdf_is_declared_a_counterpart_from_the_registry():
+    """Comparisons render the Principled BSDF beside thin coats and stacks (their ``PRINCIPLED``), not beside the
+    models whose Principled only has about the same lobe count (bpy-free half of ``compare_run.has_principled``)."""
+    assert principled_counterpart(model.ID) is mapping.PRINCIPLED and mapping.PRINCIPLED.label == "Principled BSDF"
+    assert "Anisotropic" in mapping.PRINCIPLED.mapping and "\n" not in mapping.PRINCIPLED.mapping
+    assert principled_counterpart("thin_coat").label == "Principled coat"
+    assert principled_counterpart("spongecake") is None and principled_counterpart("micrograin") is None
+    assert principled_models() == ["thin_coat", "aniso_stack"]
 
 
 # ------------------------------------------------------------------------------------------ the tables
