@@ -15,6 +15,7 @@ from . import paths, presets
 from .models import MODELS
 from .models.params import ParamError
 from .nodes import FORMS, principled_models
+from .reference import truth_models
 from .reference.scenes import KINDS
 
 SCENES = KINDS
@@ -69,8 +70,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help=f"{', '.join(principled_models())}: also render Blender's Principled BSDF set up from the "
                          "same parameters and report its error against the reference beside Lamina's")
     cp.add_argument("--truth", action="store_true",
-                    help="thin_coat: also measure the reference and Cycles against a Monte Carlo simulation of the "
-                         "coat's light paths at sampled pixels")
+                    help=f"{', '.join(truth_models())}: also measure the reference and Cycles against a Monte Carlo "
+                         "simulation of the material's light paths at sampled pixels")
     cp.add_argument("--truth-paths", type=int, default=2000, help="with --truth: paths per sampled pixel")
     cp.add_argument("--truth-stride", type=int, default=4,
                     help="with --truth: Monte Carlo at every n-th row and column (errors use those pixels)")
@@ -269,8 +270,8 @@ def _truth_settings(args):
     from .operators import compare_run
 
     if not compare_run.has_truth(args.model):
-        raise CliError(f"--truth: {args.model} has no Monte Carlo ground truth of its light paths (thin_coat has; "
-                       f"SpongeCake's Monte Carlo comparison is --ms)")
+        raise CliError(f"--truth: {args.model} has no Monte Carlo ground truth of its light paths (models with one: "
+                       f"{', '.join(truth_models())}; SpongeCake's Monte Carlo comparison is --ms)")
     try:
         return compare_run.CoatTruth(paths=args.truth_paths, stride=args.truth_stride, seed=args.seed)
     except ValueError as e:
@@ -279,7 +280,7 @@ def _truth_settings(args):
 
 def _ms_settings(args, p):
     """The Monte Carlo settings of ``compare --ms``; refuses stacks the networks do not cover."""
-    from .ms_truth import TruthSettings
+    from .reference.spongecake_truth import TruthSettings
 
     least = 2 * TruthSettings.batches  # at least 2 paths per batch
     _at_least(args, ms_paths=least, ms_albedo_paths=least, ms_stride=1)
@@ -314,7 +315,7 @@ def cmd_bench(args) -> int:
     _at_least(args, samples=1, resolution=8)
     ms = None
     if not args.no_ms:
-        from .ms_truth import TruthSettings
+        from .reference.spongecake_truth import TruthSettings
 
         least = 2 * TruthSettings.batches  # at least 2 paths per batch
         _at_least(args, ms_paths=least, ms_failure_paths=least, ms_stride=1, ms_furnace_configs=1, ms_repeats=1,

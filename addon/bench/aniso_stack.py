@@ -158,7 +158,7 @@ def preset_truth_rows(resolution: int, paths: int = PRESET_TRUTH["paths"],
     the truth's own noise in the same units, the mean directional albedos at normal view."""
     from ..operators.compare_run import CoatTruth, coat_truth_image, scene_specs
     from ..reference.metrics import rel_rmse
-    from ..ms_truth import relative_noise
+    from ..reference.montecarlo import relative_noise
     from ..reference.scenes import reference_image
 
     spec = scene_specs(["sphere"], resolution)[0]

@@ -1,7 +1,7 @@
 """SpongeCake's sections of the benchmark documents: named approximations, presets and reference vs ground truth,
 the sheen alternative, multiple scattering (``MsSizes``; ``bench --no-ms`` leaves it out: the networks against
 Monte Carlo on the held-out validation set and on the paper's failure case, a white furnace of non-absorbing
-stacks, rendered SS + MS vs Monte Carlo on presets (``addon.ms_truth``), render time with MS on vs off, the bake
+stacks, rendered SS + MS vs Monte Carlo on presets (``reference.spongecake_truth``), render time with MS on vs off, the bake
 time per megapixel), reference throughput and Cycles render times against a Principled BSDF."""
 from __future__ import annotations
 
@@ -175,7 +175,7 @@ class MsSizes:
     furnace_samples: int = 4096  # directional-albedo samples per wo (the model's own estimate)
     furnace_paths: int = 20000  # random-walk paths per wo (ground-truth albedo)
     presets: tuple = ("fabric", "window_shade")
-    truth: object = None  # ms_truth.TruthSettings of the rendered comparison (None: RENDER_TRUTH)
+    truth: object = None  # spongecake_truth.TruthSettings of the rendered comparison (None: RENDER_TRUTH)
     speed_repeats: int = 3
     bake_size: int = 512  # texels per side of the synthetic texture for bake timing
     seed: int = 7
@@ -356,7 +356,7 @@ def rendered_ms_errors(name: str, sizes: MsSizes, samples: int, resolution: int)
     """{scene: ms entry per form} of ``compare_material`` with multiple scattering, on the accuracy scenes."""
     import tempfile
 
-    from ..ms_truth import TruthSettings
+    from ..reference.spongecake_truth import TruthSettings
     from ..nodes import material as lamina_material
     from ..operators import blend_io, compare_run
 
@@ -502,7 +502,7 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               f"{worst_view['theta']:.0f}°): the extra single-scattering lobe's albedo grows towards grazing views "
               "like single scattering does, and nothing in the network bounds the sum by 1 there."]
     # --- rendered
-    from ..ms_truth import TruthSettings
+    from ..reference.spongecake_truth import TruthSettings
 
     truth = sizes.truth or TruthSettings(**RENDER_TRUTH, seed=sizes.seed)
     lines += ["", "### Rendered: SS + MS vs Monte Carlo on the presets", "",

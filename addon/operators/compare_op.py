@@ -39,11 +39,11 @@ class LaminaCompareSettings(bpy.types.PropertyGroup):
                     "coats, anisotropic stacks)")
     truth: bpy.props.BoolProperty(
         name="Monte Carlo ground truth", default=False,
-        description="Thin coats: also measure the reference, Cycles (and the Principled BSDF) against a Monte "
-                    "Carlo simulation of the coat's light paths at sampled pixels (slower)")
+        description="Also measure the reference, Cycles (and the Principled BSDF) against a Monte Carlo simulation "
+                    "of the material's light paths at sampled pixels (slower; models with such a ground truth)")
     truth_paths: bpy.props.IntProperty(
         name="Monte Carlo paths", default=2000, min=16, max=1_000_000,
-        description="Paths per sampled pixel of the thin coat's ground truth")
+        description="Paths per sampled pixel of the Monte Carlo ground truth")
     truth_stride: bpy.props.IntProperty(
         name="Monte Carlo stride", default=4, min=1, max=16,
         description="The ground truth runs at every n-th row and column; errors use those pixels")
@@ -135,7 +135,7 @@ class LAMINA_OT_compare(bpy.types.Operator):
         model_id = lamina_material.info(self._mat)["model"]
         ms = None
         if self._multiple_scattering(context, model_id):
-            from ..ms_truth import TruthSettings
+            from ..reference.spongecake_truth import TruthSettings
 
             ms = TruthSettings(paths=settings.ms_paths, albedo_paths=2 * settings.ms_paths, stride=settings.ms_stride)
         blends = settings.blends and compare_run.has_blends(model_id)

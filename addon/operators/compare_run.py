@@ -4,10 +4,10 @@ A run renders a Lamina material with Cycles and with the bundled reference on th
 (``reference.scenes``) and also measures the mapping alone: the numpy prediction of what the form renders
 against the reference, which separates the approximation's error from Cycles' sampling noise.
 
-With multiple scattering (``ms``: an ``addon.ms_truth.TruthSettings``) a run compares three things per scene:
+With multiple scattering (``ms``: an ``reference.spongecake_truth.TruthSettings``) a run compares three things per scene:
 single scattering alone (the closed-form reference), SS + MS from the network (the material with the flag on,
 rendered by Cycles and by the reference) and SS + MS from Monte Carlo (the closed-form single scattering plus
-the random walk's orders >= 2 at sampled pixels, ``addon.ms_truth``). The entries gain an ``ms`` dict.
+the random walk's orders >= 2 at sampled pixels, ``reference.spongecake_truth``). The entries gain an ``ms`` dict.
 
 A model whose mapping declares ``PRINCIPLED`` (``nodes.principled.Counterpart``: thin coats, anisotropic stacks) can
 also be compared with what an artist would otherwise use, Blender's Principled BSDF set up from the same parameters
@@ -25,12 +25,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import ms_truth
 from ..bake.exr import atomic_path, read_exr, write_exr, write_png
 from ..models import MODELS
 from ..nodes import MAPPINGS, predicted_image, principled_counterpart
 from ..nodes import material as lamina_material
-from ..reference import metrics
+from ..reference import metrics, montecarlo, truth_module
+from ..reference import spongecake_truth as ms_truth
 from ..reference import scenes as ref_scenes
 from . import blend_io, compare_core
 
@@ -73,16 +73,6 @@ def has_principled(model_id: str) -> bool:
 def principled_settings(model_id: str, p) -> dict:
     """The mapping's Principled BSDF inputs for ``p`` as JSON values (tuples as lists)."""
     return {k: list(v) if isinstance(v, tuple) else v for k, v in MAPPINGS[model_id].principled_settings(p).items()}
-
-
-def truth_module(model_id: str):
-    """The model's Monte Carlo ground truth of its light paths (``reference.<model>_truth`` with
-    ``ground_truth`` and ``ground_truth_albedo``), or None where there is none."""
-    try:
-        module = importlib.import_module(f"..reference.{model_id}_truth", __package__)
-    except ImportError:
-        return None
-    return module if all(hasattr(module, f) for f in ("ground_truth", "ground_truth_albedo")) else None
 
 
 def has_truth(model_id: str) -> bool:
@@ -243,7 +233,7 @@ def comparison_picture(images, reference, mask, heat_mask=None, gap: int = 2) ->
 
 
 def coat_truth_image(model_id: str, p, spec, settings: CoatTruth) -> dict:
-    """The Monte Carlo ground truth of ``spec`` at sampled pixels (``ms_truth.sampled_pixels``): per pixel, the
+    """The Monte Carlo ground truth of ``spec`` at sampled pixels (``montecarlo.sampled_pixels``): per pixel, the
     sum over orders of ``ground_truth(p, wi, wo)`` times the sun's irradiance and |cos θi| (a closed sphere blocks
     light from below its surface, like ``scenes.reference_image``), or for the furnace the environment times
     ``ground_truth_albedo``'s reflected and transmitted energy. Returns ``image`` (H x W x 3, the nearest sample's
@@ -253,7 +243,7 @@ def coat_truth_image(model_id: str, p, spec, settings: CoatTruth) -> dict:
     t0 = time.perf_counter()
     g = ref_scenes.pixel_geometry(spec)
     h, w = spec.height, spec.width
-    samples = ms_truth.sampled_pixels(spec, settings.stride)
+    samples = montecarlo.sampled_pixels(spec, settings.stride)
     rows, cols = np.nonzero(samples)
     wo_l = ref_scenes.to_local(g["wo"][rows, cols], g["t"][rows, cols], g["b"][rows, cols], g["n"][rows, cols])
     value = np.zeros((len(rows), 3))
@@ -282,7 +272,7 @@ def coat_truth_image(model_id: str, p, spec, settings: CoatTruth) -> dict:
     image[rows, cols], noise[rows, cols] = value, np.sqrt(var)
     hit = np.argwhere(g["hit"])
     if len(rows):
-        nearest = ms_truth.nearest(hit.astype(float), np.stack([rows, cols], axis=1).astype(float))
+        nearest = montecarlo.nearest(hit.astype(float), np.stack([rows, cols], axis=1).astype(float))
         image[hit[:, 0], hit[:, 1]] = value[nearest]
         image[rows, cols] = value
     return {"image": image, "noise": noise, "samples": samples, "seconds": time.perf_counter() - t0}
@@ -315,7 +305,7 @@ def truth_comparison(model_id: str, p, spec, cycles, reference, settings: CoatTr
     out = {
         "cycles_vs_truth": metrics.rel_rmse(cycles, mc["image"], samples),
         "reference_vs_truth": metrics.rel_rmse(reference, mc["image"], samples),
-        "truth_noise": ms_truth.relative_noise(mc["image"], mc["noise"], samples),
+        "truth_noise": montecarlo.relative_noise(mc["image"], mc["noise"], samples),
         "truth_pixels": int(samples.sum()),
         "truth_paths": settings.paths,
         "truth_stride": settings.stride,
@@ -392,7 +382,7 @@ def ms_comparison(model_id: str, p, spec, cycles, network, settings: ms_truth.Tr
         "network_vs_truth": metrics.rel_rmse(network, truth, samples),
         "single_vs_truth": metrics.rel_rmse(single, truth, samples),
         "cycles_vs_truth": metrics.rel_rmse(cycles, truth, samples),
-        "truth_noise": ms_truth.relative_noise(truth, truth_ms["noise"], samples),
+        "truth_noise": montecarlo.relative_noise(truth, truth_ms["noise"], samples),
         "truth_mean": float(truth[samples].mean()),
         "ms_share": float(truth_ms["image"][samples].mean() / max(truth[samples].mean(), 1e-300)),
         "truth_pixels": int(samples.sum()),

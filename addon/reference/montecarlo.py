@@ -1,10 +1,13 @@
 """Batched Monte Carlo estimates shared by the ground truths (``*_truth.py``): independent seeded batches, their
-mean and standard error, Beer-Lambert transmittance along a direction, and the checked view direction."""
+mean and standard error, Beer-Lambert transmittance along a direction, the checked view direction; and what
+ground-truth images share: the sampled pixels of a scene, the nearest sampled pixel, the truth's relative noise."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
+
+from . import scenes as ref_scenes
 
 
 def batches(n_paths, n_batches, seed):
@@ -35,3 +38,29 @@ def view_direction(wo):
     if wo[2] <= 0.0:
         raise ValueError("wo must be above the surface (wo_z > 0)")
     return wo
+
+
+def sampled_pixels(spec: ref_scenes.Scene, stride: int) -> np.ndarray:
+    """H x W bool: the mask's pixels at rows and columns = stride // 2 (mod stride); the whole mask when the
+    grid misses it (tiny images)."""
+    mask = ref_scenes.scene_mask(spec)
+    rows, cols = np.indices(mask.shape)
+    grid = mask & (rows % stride == stride // 2) & (cols % stride == stride // 2)
+    return grid if grid.any() else mask
+
+
+def nearest(rc_to: np.ndarray, rc_from: np.ndarray, block: int = 4096) -> np.ndarray:
+    """Index into rc_from of the nearest point for every point of rc_to (both (N, 2) pixel coordinates)."""
+    out = np.empty(len(rc_to), dtype=int)
+    for s0 in range(0, len(rc_to), block):
+        d = ((rc_to[s0:s0 + block, None, :] - rc_from[None, :, :]) ** 2).sum(-1)
+        out[s0:s0 + block] = np.argmin(d, axis=1)
+    return out
+
+
+def relative_noise(truth_image: np.ndarray, noise: np.ndarray, samples: np.ndarray) -> float:
+    """RMS standard error of the ground truth over ``samples`` / its mean there (scale of a relative RMSE)."""
+    mean = float(np.mean(truth_image[samples]))
+    if not samples.any() or mean <= 0:
+        return float("nan")
+    return float(np.sqrt(np.mean(noise[samples] ** 2)) / mean)

@@ -13,7 +13,7 @@ from addon.models import aniso_stack as model  # noqa: E402
 from addon.nodes import aniso_stack as mapping  # noqa: E402
 from addon.nodes import material  # noqa: E402
 from addon.operators import compare_run  # noqa: E402
-from test_thin_coat_ui import _panel_text  # noqa: E402
+from ui_helpers import panel_text  # noqa: E402
 
 pytestmark = pytest.mark.blender
 PRESET = "rough_tangents_30"
@@ -59,5 +59,5 @@ def test_compare_params_with_the_principled_bsdf_and_the_ground_truth(tmp_path):
 
 def test_the_compare_panel_offers_the_principled_bsdf(registered, sphere):
     p = model.params_from_dict(presets.load(model.ID, PRESET))
-    text = _panel_text(material.new_material(model.ID, p, "nodes"))
+    text = panel_text(material.new_material(model.ID, p, "nodes"))
     assert any(line.endswith(" principled") for line in text.splitlines()) and "lamina.compare" in text

@@ -12,7 +12,9 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import addon  # noqa: E402
-from addon import ms_truth, presets  # noqa: E402
+from addon import presets  # noqa: E402
+from addon.reference import montecarlo  # noqa: E402
+from addon.reference import spongecake_truth as ms_truth  # noqa: E402
 from addon.bake.exr import read_exr, read_png  # noqa: E402
 from addon.models import spongecake as model  # noqa: E402
 from addon.nodes import material  # noqa: E402
@@ -66,7 +68,7 @@ def test_images_and_numbers_agree(fabric_report):
     network = read_exr(str(out / entry["files"]["reference"]), "RGB")
     expected_single = S.reference_image(spec, lambda wi, wo: ref.eval(p, wi, wo))
     np.testing.assert_allclose(single, expected_single, rtol=1e-5, atol=1e-7)  # EXR is float32
-    samples = ms_truth.sampled_pixels(spec, SMALL.stride)
+    samples = montecarlo.sampled_pixels(spec, SMALL.stride)
     assert metrics.rel_rmse(single, truth, samples) == pytest.approx(entry["ms"]["single_vs_truth"], rel=1e-4)
     assert metrics.rel_rmse(network, truth, samples) == pytest.approx(entry["ms"]["network_vs_truth"], rel=1e-4)
     assert np.all(truth[samples] >= single[samples] - 1e-6)  # orders >= 2 only add light

@@ -10,7 +10,7 @@ measuring code always run. No predicted number is hard-coded.
 import numpy as np
 import pytest
 
-from addon import ms_truth
+from addon.reference import spongecake_truth as ms_truth
 from addon.bench import spongecake as bench
 from addon.bake import layer_rows, validation
 from addon.bake import spongecake as ms

@@ -1,9 +1,10 @@
-"""The Monte Carlo ground truth of multiple scattering on the comparison scenes (addon.ms_truth): sampled pixels,
+"""The Monte Carlo ground truth of multiple scattering on the comparison scenes (addon.reference.spongecake_truth): sampled pixels,
 the pixel -> (wi, wo) mapping of the walk, the picture fill, the noise estimate and energy conservation."""
 import numpy as np
 import pytest
 
-from addon import ms_truth
+from addon.reference import montecarlo
+from addon.reference import spongecake_truth as ms_truth
 from addon.reference import scenes as S
 from addon.reference import spongecake as ref
 
@@ -17,13 +18,13 @@ TWO_LAYERS = ref.params_from_dict({"layers": [  # anisotropic and lopsided, so a
 def test_sampled_pixels_are_a_grid_inside_the_mask():
     spec = S.sphere_scene(resolution=24)
     mask = S.scene_mask(spec)
-    s = ms_truth.sampled_pixels(spec, 3)
+    s = montecarlo.sampled_pixels(spec, 3)
     assert s.any() and not (s & ~mask).any()
     rows, cols = np.nonzero(s)
     assert set(rows % 3) == {1} and set(cols % 3) == {1}
-    assert ms_truth.sampled_pixels(spec, 1).sum() == mask.sum()
+    assert montecarlo.sampled_pixels(spec, 1).sum() == mask.sum()
     tiny = S.plane_scene(resolution=(2, 1))
-    assert ms_truth.sampled_pixels(tiny, 8).sum() == 2  # grid misses the image: every pixel
+    assert montecarlo.sampled_pixels(tiny, 8).sum() == 2  # grid misses the image: every pixel
 
 
 def test_settings_refuse_nonsense():
@@ -102,7 +103,7 @@ def test_noise_shrinks_with_the_number_of_paths():
     noise = []
     for paths in (500, 8000):
         t = ms_truth.multiple_scattering_truth(TWO_LAYERS, spec, ms_truth.TruthSettings(paths=paths, stride=1))
-        noise.append(ms_truth.relative_noise(ss + t["image"], t["noise"], t["samples"]))
+        noise.append(montecarlo.relative_noise(ss + t["image"], t["noise"], t["samples"]))
     assert 0.1 < noise[1] / noise[0] < 0.45  # 1/4 expected
 
 

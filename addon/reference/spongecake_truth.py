@@ -12,7 +12,7 @@ nearest sampled pixel's BSDF value (times their own cosine), for pictures only.
 
 Noise: every estimate is the mean of ``batches`` independent batches of the paths; their spread gives the
 standard error of the mean per pixel (``noise``; several batches, because the pixels of a plane scene share
-their paths, so two halves would give one nearly common draw for all of them). ``relative_noise`` turns it
+their paths, so two halves would give one nearly common draw for all of them). ``montecarlo.relative_noise`` turns it
 into the scale of a relative RMSE (RMS standard error / mean of the ground-truth image), the floor of any error
 measured against it (errors add in quadrature: measured² ≈ true² + noise²).
 """
@@ -23,8 +23,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .reference import scenes as ref_scenes
-from .reference import spongecake as reference
+from . import scenes as ref_scenes
+from . import spongecake as reference
+from .montecarlo import nearest, sampled_pixels
 
 __all__ = ["TruthSettings", "sampled_pixels", "multiple_scattering_truth", "relative_noise", "single_scattering"]
 
@@ -52,15 +53,6 @@ def single_scattering(p):
     return replace(p, multiple_scattering=False)
 
 
-def sampled_pixels(spec: ref_scenes.Scene, stride: int) -> np.ndarray:
-    """H x W bool: the mask's pixels at rows and columns = stride // 2 (mod stride); the whole mask when the
-    grid misses it (tiny images)."""
-    mask = ref_scenes.scene_mask(spec)
-    rows, cols = np.indices(mask.shape)
-    grid = mask & (rows % stride == stride // 2) & (cols % stride == stride // 2)
-    return grid if grid.any() else mask
-
-
 def _seed(base: int, chunk: int, half: int) -> int:
     return int(np.random.SeedSequence([int(base), int(chunk), int(half)]).generate_state(1)[0])
 
@@ -73,15 +65,6 @@ def _batches(fn, n_items: int, settings: TruthSettings):
         for h in range(settings.batches):
             out[h, sl] = fn(sl, _seed(settings.seed, c, h))
     return out.mean(axis=0), out.std(axis=0, ddof=1) / np.sqrt(settings.batches)
-
-
-def nearest(rc_to: np.ndarray, rc_from: np.ndarray, block: int = 4096) -> np.ndarray:
-    """Index into rc_from of the nearest point for every point of rc_to (both (N, 2) pixel coordinates)."""
-    out = np.empty(len(rc_to), dtype=int)
-    for s0 in range(0, len(rc_to), block):
-        d = ((rc_to[s0:s0 + block, None, :] - rc_from[None, :, :]) ** 2).sum(-1)
-        out[s0:s0 + block] = np.argmin(d, axis=1)
-    return out
 
 
 def multiple_scattering_truth(p, spec: ref_scenes.Scene, settings: TruthSettings = TruthSettings()) -> dict:
@@ -145,11 +128,3 @@ def multiple_scattering_truth(p, spec: ref_scenes.Scene, settings: TruthSettings
             image[targets] += f[near] * (1.0 if cos_i is None else cos_i[targets, None])
     return {"image": image.reshape(h, w, 3), "noise": noise.reshape(h, w, 3), "samples": samples,
             "seconds": time.perf_counter() - t0, "settings": settings}
-
-
-def relative_noise(truth_image: np.ndarray, noise: np.ndarray, samples: np.ndarray) -> float:
-    """RMS standard error of the ground truth over ``samples`` / its mean there (scale of a relative RMSE)."""
-    mean = float(np.mean(truth_image[samples]))
-    if not samples.any() or mean <= 0:
-        return float("nan")
-    return float(np.sqrt(np.mean(noise[samples] ** 2)) / mean)
