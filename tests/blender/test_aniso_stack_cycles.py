@@ -141,3 +141,30 @@ def test_osl_compiles_for_every_structure(case):
     p = model.params_from_dict({**STRUCTURES, **EXTREMES}[case])
     params = {q.name for q in osl.parse_params(osl.compile_source(material.osl_source(model.ID, p)))}
     assert {expr.osl_identifier(s.name) for s in mapping.sockets(p)} <= params
+
+
+@pytest.mark.parametrize("form", ["nodes", "osl"])
+def test_a_mesh_without_a_uv_map_renders_the_same(form, tmp_path, monkeypatch):
+    """The stack's tangent is the Geometry node's (Cycles' tangent from Generated coordinates, about the object's Z):
+    a mesh without a UV map renders exactly as one with, never black."""
+    from addon.operators import cycles_render
+
+    mat = material.new_material(model.ID, PRESETS["brushed_steel_scratched_coat"], form)
+    spec = S.sphere_scene(resolution=16)
+    with_uv = render(mat, spec, 4, tmp_path)
+    build = cycles_render.build_scene
+
+    def without_uv(*args, **kwargs):
+        scene, created = build(*args, **kwargs)
+        for kind, data in created:
+            if kind == "meshes":
+                while data.uv_layers:
+                    data.uv_layers.remove(data.uv_layers[0])
+                assert len(data.uv_layers) == 0
+        return scene, created
+
+    monkeypatch.setattr(cycles_render, "build_scene", without_uv)
+    bare = render(mat, spec, 4, tmp_path)
+    assert np.isfinite(bare).all() and bare.min() >= 0.0
+    assert bare[S.scene_mask(spec)].mean() > 1e-2  # lit (the mean of this render is about 0.04)
+    assert np.allclose(bare, with_uv, rtol=1e-5, atol=1e-7)

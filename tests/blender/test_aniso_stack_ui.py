@@ -34,7 +34,7 @@ def test_the_panel_summarises_the_stack_and_names_texture_driven_inputs(register
     assert "medium: σa·d 0.01, 1, 0.01, scattering g 0.90" in text and "lamina.set_form" in text
     node = material.shader_node(mat)
     mat.node_tree.links.new(mat.node_tree.nodes.new("ShaderNodeTexImage").outputs["Color"], node.inputs["Rotation_2"])
-    assert "Texture-driven: Rotation 2" in panel_text(mat)
+    assert "Texture-driven: Rotation 2" in panel_text(mat) and "no UV map needed" in text
 
 
 # ------------------------------------------------------------------------------------------ the Add dialog
