@@ -85,20 +85,14 @@ def test_ggx_visible_normal_sampler_matches_its_density():
 
 # ---------------------------------------------------------------------------------------- Fresnel
 
-def _pbrt_conductor(cos_i, eta, k):
-    """Independent real-arithmetic conductor Fresnel (pbrt-v3 FrConductor) for the comparison."""
-    c2 = cos_i[:, None] ** 2
-    s2 = 1 - c2
-    t0 = eta * eta - k * k - s2
-    a2b2 = np.sqrt(t0 * t0 + 4 * eta * eta * k * k)
-    a = np.sqrt(0.5 * (a2b2 + t0))
-    t1 = a2b2 + c2
-    t2 = 2 * np.sqrt(c2) * a
-    rs = (t1 - t2) / (t1 + t2)
-    t3 = c2 * a2b2 + s2 * s2
-    t4 = t2 * s2
-    rp = rs * (t3 - t4) / (t3 + t4)
-    return 0.5 * (rs + rp)
+def _complex_conductor(cos_i, eta, k):
+    """Independent conductor Fresnel for the comparison: Snell's law with the complex index n = eta + i k."""
+    c = cos_i[:, None].astype(complex)
+    n = eta + 1j * k
+    n_cos_t = np.sqrt(n * n - (1.0 - c * c))
+    rs = (c - n_cos_t) / (c + n_cos_t)
+    rp = (n * n * c - n_cos_t) / (n * n * c + n_cos_t)
+    return 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
 
 
 def test_schlick_limits():
@@ -122,11 +116,13 @@ def test_dielectric_fresnel_known_values():
     assert microfacet.fresnel_dielectric(np.array([0.0]), eta)[0] == 1.0
 
 
-def test_conductor_fresnel_matches_real_arithmetic_and_limits():
+def test_conductor_fresnel_matches_complex_snell_and_limits():
     c = np.linspace(0.0, 1.0, 101)
-    for eta, k in (((0.2, 0.92, 1.1), (3.9, 2.45, 2.14)), ((1.5, 2.0, 0.3), (0.0, 0.5, 7.0))):
+    for eta, k in (((0.2, 0.92, 1.1), (3.9, 2.45, 2.14)), ((1.5, 2.0, 0.3), (0.0, 0.5, 7.0)),
+                   ((1.0, 0.67, 0.01), (1.0, 0.0, 0.0)), ((10.0, 1.0, 0.5), (20.0, 1e-9, 0.0))):  # TIR where k = 0
         eta, k = np.array(eta), np.array(k)
-        assert np.allclose(microfacet.fresnel_conductor(c, eta, k), _pbrt_conductor(c, eta, k), rtol=1e-10, atol=1e-14)
+        assert np.allclose(microfacet.fresnel_conductor(c, eta, k), _complex_conductor(c, eta, k), rtol=1e-10,
+                           atol=1e-14)
         normal = ((eta - 1) ** 2 + k ** 2) / ((eta + 1) ** 2 + k ** 2)
         assert np.allclose(microfacet.fresnel_conductor(np.array([1.0]), eta, k)[0], normal, rtol=1e-12)
     assert np.allclose(microfacet.fresnel_conductor(np.array([0.0]), eta, k), 1.0)
