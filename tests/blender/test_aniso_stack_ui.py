@@ -125,3 +125,11 @@ def test_the_dialog_adds_a_material_and_undo_removes_it(registered, sphere):
     assert [m.name for m in bpy.data.materials] == ["My paint"]
     assert bpy.ops.lamina.add_aniso_stack(preset="brushed_steel_scratched_coat") == {"FINISHED"}
     assert bpy.data.objects["ball"].material_slots[0].material.name == "Anisotropic Stack Brushed steel scratched coat"
+
+
+def test_a_glossy_setting_beyond_alpha_1_is_clamped_with_a_warning(registered, sphere, capsys):
+    """Roughness 0.8 with Anisotropy 0.5 asks for αy = 1.28: the material is made with αy = 1 and the report says so."""
+    assert bpy.ops.lamina.add_aniso_stack(roughness_2=0.8, anisotropy_2=0.5) == {"FINISHED"}
+    _, p = material.current_params(bpy.data.objects["ball"].material_slots[0].material)
+    assert p.interfaces[1].alpha == pytest.approx((0.32, 1.0))
+    assert "interface 2: alpha_y: 1.28 is outside [0.0001, 1], clamped to 1" in capsys.readouterr().out
