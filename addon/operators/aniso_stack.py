@@ -8,8 +8,8 @@ import bpy
 from .. import presets
 from ..models import aniso_stack as model
 from ..models.metals import METALS
-from .material_ops import (CUSTOM, FORM_ITEMS, add_material, conductor_values, declared, draw_conductor,
-                           has_material_slots, label, metal_items, preset_items, sigma_a_from_color)
+from .material_ops import (CUSTOM, AddMaterialDialog, add_material, conductor_values, declared, draw_conductor, label,
+                           metal_items, preset_items, sigma_a_from_color)
 
 PRESET_ITEMS = preset_items(model.ID, "Set the interfaces and the media between them below")
 BASE_ITEMS = [("conductor", "Metal", "The last interface is a metal (complex IOR): brushed metal, car paint's flakes"),
@@ -80,13 +80,13 @@ def stack_lines(p) -> list[str]:
     return lines
 
 
-class LAMINA_OT_add_aniso_stack(bpy.types.Operator):
+class LAMINA_OT_add_aniso_stack(AddMaterialDialog, bpy.types.Operator):
     """Add a new Anisotropic Stack material to the active object: rough interfaces (a clear coat, a brushed metal,
     fibres) each with its own anisotropic roughness and tangent, from a preset or custom"""
 
     bl_idname = "lamina.add_aniso_stack"
     bl_label = "Add Anisotropic Stack Material"
-    bl_options = {"REGISTER", "UNDO"}
+    dialog_width = 420
 
     preset: bpy.props.EnumProperty(name="Preset", items=PRESET_ITEMS, default=CUSTOM,
                                    description="A stack after the paper's Figs. 4, 7 and 8 and common finishes, "
@@ -101,14 +101,6 @@ class LAMINA_OT_add_aniso_stack(bpy.types.Operator):
     metal_k: declared(model.INTERFACE["conductor"], "k", name="Extinction k", default=METALS["aluminium"][1])
     roughness_control: bpy.props.EnumProperty(name="Roughness", items=ROUGHNESS_ITEMS, default="glossy",
                                               description="How each interface's anisotropic roughness is set")
-    form: bpy.props.EnumProperty(name="Form", items=FORM_ITEMS, default="nodes")
-
-    @classmethod
-    def poll(cls, context):
-        return has_material_slots(context)
-
-    def invoke(self, context, event):
-        return context.window_manager.invoke_props_dialog(self, width=420)
 
     def draw(self, context):
         layout = self.layout

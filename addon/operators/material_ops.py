@@ -80,6 +80,23 @@ def has_material_slots(context) -> bool:
     return obj is not None and hasattr(obj.data, "materials")
 
 
+class AddMaterialDialog:
+    """What every Add dialog shares (a mixin before ``bpy.types.Operator``): undoable, the Form choice, offered with an
+    active object that has material slots, drawn as a dialog ``dialog_width`` wide."""
+
+    bl_options = {"REGISTER", "UNDO"}
+    dialog_width = 300
+
+    form: bpy.props.EnumProperty(name="Form", items=FORM_ITEMS, default="nodes")
+
+    @classmethod
+    def poll(cls, context):
+        return has_material_slots(context)
+
+    def invoke(self, context, event):
+        return context.window_manager.invoke_props_dialog(self, width=self.dialog_width)
+
+
 def add_material(op, context, model_id: str, data: dict, name: str) -> set:
     """The end of an Add dialog: validate ``data`` (refusals reported, clamps warned), build the material in the
     dialog's form, link it in the active slot."""

@@ -9,7 +9,7 @@ from ..models import micrograin
 from ..models.params import ParamError
 from ..nodes import wrap
 from . import blend_io
-from .material_ops import (CUSTOM, FORM_ITEMS, assign_to_active_slot, built_or_reported, conductor_values, declared,
+from .material_ops import (CUSTOM, AddMaterialDialog, assign_to_active_slot, built_or_reported, conductor_values, declared,
                            draw_conductor, metal_items, preset_items, warn_if_osl_is_off)
 
 PRESET_ITEMS = preset_items(micrograin.ID, "Set the filling factor and the grains below")
@@ -26,13 +26,13 @@ GRAIN_ITEMS = [(key, micrograin.GRAIN_LABELS[key], description) for key, descrip
 CONDUCTOR_ITEMS = metal_items(micrograin.CONDUCTORS, "Grains of")
 
 
-class LAMINA_OT_add_porous_layer(bpy.types.Operator):
+class LAMINA_OT_add_porous_layer(AddMaterialDialog, bpy.types.Operator):
     """Add a micrograin porous layer (dust, rust, dirt, spray paint) over the active material: a new material
     wrapping a copy of it (the original is never changed)"""
 
     bl_idname = "lamina.add_porous_layer"
     bl_label = "Add Porous Layer"
-    bl_options = {"REGISTER", "UNDO"}
+    dialog_width = 360
 
     preset: bpy.props.EnumProperty(name="Preset", items=PRESET_ITEMS, default=CUSTOM,
                                    description="A porous layer after the paper's Fig. 1, or Custom (the "
@@ -50,7 +50,6 @@ class LAMINA_OT_add_porous_layer(bpy.types.Operator):
                                       description="What the conductor grains are made of")
     conductor_ior: declared(micrograin.GRAIN["conductor"], "ior", name="IOR n")
     conductor_k: declared(micrograin.GRAIN["conductor"], "k", name="Extinction k")
-    form: bpy.props.EnumProperty(name="Form", items=FORM_ITEMS, default="nodes")
     assign_to_slot: bpy.props.BoolProperty(
         name="Assign to slot", default=True,
         description="Put the new material in the active slot instead of the original (which stays in the file, "
@@ -67,9 +66,6 @@ class LAMINA_OT_add_porous_layer(bpy.types.Operator):
             cls.poll_message_set("Already has a porous layer: edit its Filling Factor on the Lamina node")
             return False
         return True
-
-    def invoke(self, context, event):
-        return context.window_manager.invoke_props_dialog(self, width=360)
 
     def draw(self, context):
         layout = self.layout

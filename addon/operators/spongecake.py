@@ -5,7 +5,7 @@ import bpy
 
 from .. import presets
 from ..models import spongecake as model
-from .material_ops import CUSTOM, FORM_ITEMS, add_material, has_material_slots, label, preset_items
+from .material_ops import CUSTOM, AddMaterialDialog, add_material, label, preset_items
 
 LAYER_ITEMS = [(t, t.capitalize() if t != "hg" else "Henyey-Greenstein", "") for t in model.LAYER_TYPES]
 SUBSTRATE_ITEMS = [(t, t.capitalize(), "") for t in model.SUBSTRATE_TYPES]
@@ -18,12 +18,11 @@ def scratch_dict(n_layers: int, layer_types, substrate: str, delta: bool) -> dic
             "delta_transmission": delta}
 
 
-class LAMINA_OT_add_spongecake(bpy.types.Operator):
+class LAMINA_OT_add_spongecake(AddMaterialDialog, bpy.types.Operator):
     """Add a new SpongeCake material to the active object, from a preset or from scratch"""
 
     bl_idname = "lamina.add_spongecake"
     bl_label = "Add SpongeCake Material"
-    bl_options = {"REGISTER", "UNDO"}
 
     preset: bpy.props.EnumProperty(name="Preset", items=PRESET_ITEMS)
     layers: bpy.props.IntProperty(name="Layers", default=1, min=1, max=model.MAX_LAYERS)
@@ -36,14 +35,6 @@ class LAMINA_OT_add_spongecake(bpy.types.Operator):
     multiple_scattering: bpy.props.BoolProperty(
         name="Multiple scattering", default=False,
         description="Add the network-predicted multiple scattering (stacks of 1 or 2 layers)")
-    form: bpy.props.EnumProperty(name="Form", items=FORM_ITEMS, default="nodes")
-
-    @classmethod
-    def poll(cls, context):
-        return has_material_slots(context)
-
-    def invoke(self, context, event):
-        return context.window_manager.invoke_props_dialog(self)
 
     def draw(self, context):
         layout = self.layout

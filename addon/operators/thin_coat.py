@@ -7,8 +7,8 @@ import bpy
 from .. import presets
 from ..models import metals, thin_coat
 from ..models.metals import METALS
-from .material_ops import (CUSTOM, FORM_ITEMS, add_material, conductor_values, declared, draw_conductor,
-                           has_material_slots, label, metal_items, preset_items, sigma_a_from_color)
+from .material_ops import (CUSTOM, AddMaterialDialog, add_material, conductor_values, declared, draw_conductor, label,
+                           metal_items, preset_items, sigma_a_from_color)
 
 PRESET_ITEMS = preset_items(thin_coat.ID, "Set the interfaces, the coat and the base below")
 BASE_ITEMS = [(key, thin_coat.BASE_LABELS[key], description) for key, description in (
@@ -31,13 +31,13 @@ def interface_text(p, side: str) -> str:
     return f"roughness α {getattr(p, f'roughness_{side}'):.3g} ({kappa_text(getattr(p, f'kappa_{side}'))})"
 
 
-class LAMINA_OT_add_thin_coat(bpy.types.Operator):
+class LAMINA_OT_add_thin_coat(AddMaterialDialog, bpy.types.Operator):
     """Add a new Thin Coat material to the active object (a clear or tinted transparent coat, rough on both sides,
     over a diffuse, metal or dielectric base, or a free-standing thin sheet), from a preset or custom"""
 
     bl_idname = "lamina.add_thin_coat"
     bl_label = "Add Thin Coat Material"
-    bl_options = {"REGISTER", "UNDO"}
+    dialog_width = 380
 
     preset: bpy.props.EnumProperty(name="Preset", items=PRESET_ITEMS, default=CUSTOM,
                                    description="A coat after the paper's Figs. 16 and 18 and common finishes, "
@@ -59,14 +59,6 @@ class LAMINA_OT_add_thin_coat(bpy.types.Operator):
     metal_ior: declared(thin_coat.BASE["conductor"], "eta", name="IOR n", default=METALS["aluminium"][0])
     metal_k: declared(thin_coat.BASE["conductor"], "k", name="Extinction k", default=METALS["aluminium"][1])
     bounces: declared(thin_coat.STACK, "bounces")
-    form: bpy.props.EnumProperty(name="Form", items=FORM_ITEMS, default="nodes")
-
-    @classmethod
-    def poll(cls, context):
-        return has_material_slots(context)
-
-    def invoke(self, context, event):
-        return context.window_manager.invoke_props_dialog(self, width=380)
 
     def draw(self, context):
         layout = self.layout
