@@ -39,10 +39,11 @@ from training import medium_tracer as mt
 VERSION = 1
 DEFAULT_CACHE = Path(os.environ.get("LAMINA_CACHE", Path.home() / ".cache" / "lamina")) / "neural-medium"
 
-# 6 x 6 = 36 materials. Albedo is spaced in log(1 - alpha) (what multiple scattering depends on) up to milk's
-# 0.999; g from -0.9 to 0.95, denser where real media are (milk, wax, clouds: 0.7-0.9).
-ALBEDOS = (0.3, 0.7, 0.9, 0.97, 0.99, 0.999)
-GS = (-0.9, -0.3, 0.3, 0.7, 0.85, 0.95)
+# 7 x 6 = 42 materials. Albedo is spaced in log(1 - alpha) (what multiple scattering depends on) from oil's low
+# albedos (0.03-0.45 in the paper's Table 1) up to milk's 0.999; g from -0.9 to 0.95 with the isotropic media of
+# Table 1 (Lucy, cloud: g = 0) on the grid and denser where real media are (milk, wax, dragon: 0.5-0.9).
+ALBEDOS = (0.05, 0.3, 0.7, 0.9, 0.97, 0.99, 0.999)
+GS = (-0.9, -0.3, 0.0, 0.5, 0.8, 0.95)
 
 COLLISIONS = 4e8  # full walks per material: photons = COLLISIONS / (expected collisions + 1)
 DOUBLE_PHOTONS = 40_000_000  # walks cut after collision 2 (the double table)
