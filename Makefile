@@ -11,7 +11,7 @@ DATA ?= $(HOME)/.cache/lamina/spongecake-ms
 # Neural participating media: tables of double and multiple scattering per material (resumable; docs/training.md).
 MEDIUM_DATA ?= $(HOME)/.cache/lamina/neural-medium
 
-.PHONY: venv test test-4.2 test-all demo bench extension dataset train validation-set medium-dataset clean
+.PHONY: venv test test-4.2 test-all demo bench extension dataset train validation-set medium-dataset medium-networks clean
 
 venv: $(VENV)/.stamp
 
@@ -54,6 +54,10 @@ train: venv
 # The neural_medium tables: 36 materials (albedo x g), about an hour on 2 cores, resumable.
 medium-dataset: venv
 	$(PY) -m training.medium_dataset --out $(MEDIUM_DATA)
+
+# The neural_medium networks from that dataset (addon/bake/weights/neural_medium_*.npz, 11.8 KB each).
+medium-networks: venv
+	$(PY) -m training.medium_train --data $(MEDIUM_DATA) --out addon/bake/weights
 
 # The held-out validation set shipped in tests/data (independent seed, 4x the paths).
 validation-set: venv

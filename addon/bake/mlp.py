@@ -1,8 +1,9 @@
 """Numpy inference of the small MLPs trained in ``training/`` (Blender ships no torch).
 
 A weights file is an .npz with ``w0, b0, w1, b1, ...`` (``w`` of shape (inputs, outputs)) and a JSON
-``manifest`` string (training data size, seed, validation errors, code version). Hidden layers use SiLU,
-x·sigmoid(x), the activation the training code uses; the last layer is linear.
+``manifest`` string (training data size, seed, validation errors, code version). Hidden layers use the manifest's
+``activation``: SiLU, x·sigmoid(x) (the default: SpongeCake's networks), or tanh (the neural media's, as their
+paper); the last layer is linear.
 """
 from __future__ import annotations
 
@@ -18,6 +19,9 @@ def silu(x):
     return x / (1.0 + np.exp(-np.clip(x, -60.0, 60.0)))
 
 
+ACTIVATIONS = {"silu": silu, "tanh": np.tanh}
+
+
 @dataclass(frozen=True)
 class MLP:
     weights: tuple
@@ -29,11 +33,12 @@ class MLP:
         return self.weights[0].shape[0]
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
+        activation = ACTIVATIONS[self.manifest.get("activation", "silu")]
         h = np.asarray(x, dtype=np.float64)
         for i, (w, b) in enumerate(zip(self.weights, self.biases)):
             h = h @ w + b
             if i + 1 < len(self.weights):
-                h = silu(h)
+                h = activation(h)
         return h
 
 

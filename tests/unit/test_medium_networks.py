@@ -1,0 +1,92 @@
+"""The neural_medium networks end to end on a tiny dataset: the training script exports what the add-on's numpy
+inference reads (numpy = torch to 1e-5), the encoding, the table reconstruction and its energy measure."""
+import math
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from addon.bake import mlp  # noqa: E402
+from addon.reference import neural_medium as nm  # noqa: E402
+from training import medium_dataset, medium_train  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    data, out = tmp_path_factory.mktemp("data"), tmp_path_factory.mktemp("weights")
+    assert medium_dataset.main(["--out", str(data), "--albedos", "0.7", "0.95", "--gs", "0.0", "0.6", "--quick",
+                                "--workers", "1"]) == 0
+    assert medium_train.main(["--data", str(data), "--out", str(out), "--quick", "--hold-out", "a0.9500_g+0.600"]) == 0
+    return data, out
+
+
+def test_numpy_inference_equals_torch(trained):
+    data, out = trained
+    for kind in nm.KINDS:
+        net = nm.network(kind, out)
+        m = medium_train.load_material(sorted(data.glob("*.npz"))[0], kind)
+        x, _ = medium_train.samples(m)
+        torch_net = medium_train.make_network(0)
+        linears = [layer for layer in torch_net if isinstance(layer, torch.nn.Linear)]
+        with torch.no_grad():
+            for layer, w, b in zip(linears, net.weights, net.biases):
+                layer.weight.copy_(torch.from_numpy(w.T.astype(np.float32)))
+                layer.bias.copy_(torch.from_numpy(b.astype(np.float32)))
+            expected = torch_net(torch.from_numpy(x)).numpy()[:, 0]
+        np.testing.assert_allclose(net(x)[:, 0], expected, rtol=1e-5, atol=1e-5)
+
+
+def test_the_weights_are_the_papers_size_and_say_how_they_were_made(trained):
+    _, out = trained
+    for kind in nm.KINDS:
+        net = nm.network(kind, out)
+        assert [w.shape for w in net.weights] == [(6, 50), (50, 50), (50, 1)]
+        assert 4 * sum(w.size + b.size for w, b in zip(net.weights, net.biases)) <= 12 * 1024  # float32, 11.8 KB
+        m = net.manifest
+        assert m["activation"] == "tanh" and m["encoding"] == nm.ENCODING and m["target"] == "log(1 + Phi)"
+        assert m["data"]["materials"] == ["a0.7000_g+0.000", "a0.7000_g+0.600", "a0.9500_g+0.000"]
+        assert set(m["energy_ratio"]["held_out"]["per_material"]) == {"a0.9500_g+0.600"}
+        assert all(math.isfinite(v) for v in m["energy_ratio"]["training"]["per_material"].values())
+
+
+def test_tanh_networks_differ_from_silu_ones():
+    """The activation comes from the manifest: the same weights under SiLU give another function."""
+    rng = np.random.default_rng(0)
+    weights, biases = (rng.normal(size=(6, 4)), rng.normal(size=(4, 1))), (rng.normal(size=4), rng.normal(size=1))
+    x = rng.random((5, 6))
+    tanh = mlp.MLP(weights, biases, {"activation": "tanh"})(x)
+    silu = mlp.MLP(weights, biases, {})(x)
+    np.testing.assert_allclose(tanh, np.tanh(x @ weights[0] + biases[0]) @ weights[1] + biases[1])
+    assert not np.allclose(tanh, silu)
+
+
+def test_encoding_maps_the_training_range_into_the_unit_cube():
+    x = nm.encode(np.array([0.0, 256.0]), np.array([-256.0, 256.0]), np.array([0.0, math.pi]),
+                  np.array([0.0, math.pi]), np.array([0.0, 0.999]), np.array([-1.0, 1.0]))
+    np.testing.assert_allclose(x, [[0, 0, 0, 0, 0, 0], [1, 1, 1, 1, 1, 1]], atol=1e-12)
+    assert nm.encode(1.0, 0.0, 0.0, 0.0, 1.0, 0.0)[0, 4] == 1.0  # albedos above ALBEDO_MAX are taken at it
+    z = nm.encode(0.0, np.array([-3.0, 0.0, 3.0]), 0.0, 0.0, 0.5, 0.0)[:, 1]
+    assert z[1] == 0.5 and z[0] + z[2] == pytest.approx(1.0)
+
+
+def test_cell_centres_lie_inside_their_cells():
+    rho_edges, z_edges = np.array([0.0, 0.5, 2.0, 30.0]), np.array([-40.0, -1.0, 0.0, 3.0])
+    rho_c, z_c = nm.cell_centres(rho_edges, z_edges)
+    assert np.all((rho_edges[:-1] < rho_c) & (rho_c < rho_edges[1:]))
+    assert np.all((z_edges[:-1] < z_c) & (z_c < z_edges[1:]))
+
+
+def test_table_energy_integrates_volume_and_solid_angle():
+    """A constant Phi = 1 over a cylinder of radius 2 and height 3 emits 4 pi x its volume."""
+    phi = np.ones((2, 3, 6, 5))
+    energy = nm.table_energy(phi, [0.0, 1.0, 2.0], [0.0, 1.0, 2.0, 3.0])
+    assert energy == pytest.approx(4.0 * math.pi * math.pi * 4.0 * 3.0)
+    assert nm.bin_solid_angles(18, 18).sum() == pytest.approx(4.0 * math.pi)
+
+
+def test_unknown_network_and_missing_weights_are_clear(tmp_path):
+    with pytest.raises(ValueError, match="unknown network"):
+        nm.network("triple")
+    with pytest.raises(FileNotFoundError, match="missing"):
+        nm.network("double", tmp_path)
