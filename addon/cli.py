@@ -87,6 +87,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     bn = sub.add_parser("bench", help="benchmarks and accuracy tables (docs/benchmarks.md, docs/accuracy.md)")
     bn.add_argument("--out", default="docs")
+    bn.add_argument("--model", action="append", choices=list(MODELS),
+                    help="measure only this model again (repeatable) and replace its sections in the existing pages")
     bn.add_argument("--samples", type=int, default=64)
     bn.add_argument("--resolution", type=int, default=64)
     bn.add_argument("--no-ms", action="store_true", help="leave out the multiple-scattering sections")
@@ -325,7 +327,10 @@ def cmd_bench(args) -> int:
                            furnace_configs=args.ms_furnace_configs, failure_paths=args.ms_failure_paths,
                            speed_repeats=args.ms_repeats, bake_size=args.ms_bake_size)
     os.makedirs(out, exist_ok=True)
-    bench.run(out, bench.Sizes(samples=args.samples, resolution=args.resolution, ms=ms))
+    try:
+        bench.run(out, bench.Sizes(samples=args.samples, resolution=args.resolution, ms=ms), models=args.model)
+    except (ValueError, FileNotFoundError) as e:  # --model on pages without its marked section, or no pages
+        raise CliError(f"bench --model: {e}") from None
     return 0
 
 

@@ -86,15 +86,46 @@ def overview_picture(path: str, sizes: Sizes) -> None:
         write_png(path, read_png(os.path.join(tmp, OVERVIEW)))
 
 
-def run(out_dir: str, sizes: Sizes = Sizes()) -> None:
-    """Both documents and the overview picture into ``out_dir``."""
+def _markers(model_id: str) -> tuple[str, str]:
+    return f"<!-- lamina-bench {model_id} -->", f"<!-- /lamina-bench {model_id} -->"
+
+
+def marked(model_id: str, section: str) -> str:
+    """A model's section between markers (invisible in the rendered page), so that ``bench --model`` can replace it."""
+    start, end = _markers(model_id)
+    return f"\n{start}\n{section.strip(chr(10))}\n{end}\n"
+
+
+def splice(text: str, model_id: str, section: str, note: str) -> str:
+    """``text`` with the marked section of ``model_id`` replaced by ``section`` and ``note`` (refused when the page
+    has no such section: run the whole bench once)."""
+    start, end = _markers(model_id)
+    i, j = text.find(start), text.find(end)
+    if i < 0 or j < i:
+        raise ValueError(f"the page has no marked {model_id} section: run the whole `make bench` first")
+    return text[:i] + marked(model_id, f"{section.strip(chr(10))}\n\n{note}").lstrip("\n") + text[j + len(end) + 1:]
+
+
+def run(out_dir: str, sizes: Sizes = Sizes(), models: list[str] | None = None) -> None:
+    """Both documents and the overview picture into ``out_dir``; with ``models``, only those models' sections are
+    measured again and replaced in the existing documents (the overview picture is left as it is)."""
     from ..operators.compare_run import write_text_atomic
 
     os.makedirs(out_dir, exist_ok=True)
-    overview_picture(os.path.join(out_dir, "images", "overview.png"), sizes)
-    benches = model_benches()
+    if models is None:
+        overview_picture(os.path.join(out_dir, "images", "overview.png"), sizes)
+    benches = [b for b in model_benches() if models is None or b.MODEL in models]
     for name, header, section in (("accuracy.md", accuracy_header(sizes.resolution), "accuracy"),
                                   ("benchmarks.md", speed_header(sizes.timing_samples), "speed")):
-        text = header + "".join(getattr(bench, section)(sizes) for bench in benches)
-        write_text_atomic(os.path.join(out_dir, name), text)
-        print(f"lamina: wrote {os.path.join(out_dir, name)}", flush=True)
+        path = os.path.join(out_dir, name)
+        if models is None:
+            text = header + "".join(marked(b.MODEL, getattr(b, section)(sizes)) for b in benches)
+        else:
+            with open(path, encoding="utf-8") as f:
+                text = f.read()
+            for b in benches:
+                note = (f"*This model's sections were measured again alone (`bench --model {b.MODEL}`, "
+                        f"{datetime.date.today().isoformat()}); the rest of the page is from the run above.*")
+                text = splice(text, b.MODEL, getattr(b, section)(sizes), note)
+        write_text_atomic(path, text)
+        print(f"lamina: wrote {path}", flush=True)
