@@ -8,11 +8,14 @@ Closed forms (one channel; slab of optical thickness tau, a sun of irradiance E 
 viewed at cosine mu, optical depth u from the lit side, p the HG phase function of the propagation directions):
 
 * reflected (sun above, entering through the top):
-      L1 = Int_0^tau alpha p E exp(-u / mu0) exp(-u / mu) du / mu = alpha p E mu0 / (mu0 + mu) (1 - exp(-tau (1/mu0 + 1/mu)))
+      L1 = Int_0^tau alpha p E exp(-u / mu0) exp(-u / mu) du / mu
+         = alpha p E mu0 / (mu0 + mu) (1 - exp(-tau (1/mu0 + 1/mu)))
 * backlit (sun below, entering through the bottom, camera above):
       L1 = Int_0^tau alpha p E exp(-u / mu0) exp(-(tau - u) / mu) du / mu
-         = alpha p E mu0 (exp(-tau / mu) - exp(-tau / mu0)) / (mu - mu0)        (-> alpha p E tau exp(-tau/mu) / mu at mu = mu0)
-* single-scattered radiance inside (sun above), at depth u below the top, propagating along w' (z component mu', m = -mu'):
+         = alpha p E mu0 (exp(-tau / mu) - exp(-tau / mu0)) / (mu - mu0)
+      (-> alpha p E tau exp(-tau / mu) / mu at mu = mu0)
+* single-scattered radiance inside (sun above), at depth u below the top, propagating along w' (z component mu',
+  m = -mu'):
       upward:   I1 = alpha E p(w_sun . w') mu0 / (mu0 + mu') (exp(-u / mu0) - exp(-tau / mu0 - (tau - u) / mu'))
       downward: I1 = alpha E p(w_sun . w') mu0 (exp(-u / m) - exp(-u / mu0)) / (m - mu0)
   so the second order seen from straight above is L2 = Int_0^tau exp(-u) alpha Int_4pi p(w' . z) I1(u, w') dw' du.
@@ -149,7 +152,8 @@ def test_wide_box_centre_is_the_slab():
     alpha, g, E = 0.9, 0.3, 1.0
     p = medium(alpha, g, sigma_t=1.5)
     scene = sc.sphere_scene(elevation_deg=50.0, resolution=1)
-    r = nt.render(p, nt.Box((-30.0, -30.0, -0.2), (30.0, 30.0, 0.2)), scene, 20000, seed=4, max_order=1, batches=BATCHES)
+    box = nt.Box((-30.0, -30.0, -0.2), (30.0, 30.0, 0.2))
+    r = nt.render(p, box, scene, 20000, seed=4, max_order=1, batches=BATCHES)
     l = np.asarray(scene.suns[0].direction)
     expected = slab_single_reflected(alpha, g, 1.5 * 0.4, l[2], 1.0, -l[2], E)
     assert np.all(np.abs(z_score(r["order1"][0, 0], expected, r["noise"]["order1"][0, 0])) < 3.0)
