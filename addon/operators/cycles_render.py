@@ -69,7 +69,7 @@ def _look_at_rotation(direction):
     return Vector(direction).to_track_quat("Z", "Y").to_euler()
 
 
-def _configure(scene, spec, samples, seed, osl):
+def _configure(scene, spec, samples, seed, osl, bounces=0):
     w, h = spec.resolution
     r = scene.render
     r.engine = "CYCLES"
@@ -106,12 +106,11 @@ def _configure(scene, spec, samples, seed, osl):
     c.use_adaptive_sampling = False
     c.use_denoising = False
     c.time_limit = 0.0
-    c.max_bounces = 0
+    c.max_bounces = c.volume_bounces = int(bounces)  # 0: direct light only (a volume's single scattering)
     c.diffuse_bounces = 0
     c.glossy_bounces = 0
     c.transmission_bounces = 0
-    c.volume_bounces = 0
-    c.transparent_max_bounces = 8  # lets the furnace see delta transmission (transparent closures)
+    c.transparent_max_bounces = max(8, int(bounces))  # lets the furnace see delta transmission (transparent closures)
     c.min_light_bounces = 0
     c.min_transparent_bounces = 0
     c.sample_clamp_direct = 0.0
@@ -126,14 +125,14 @@ def _configure(scene, spec, samples, seed, osl):
     c.use_auto_tile = False
 
 
-def build_scene(material, spec, samples=16, seed=0):
+def build_scene(material, spec, samples=16, seed=0, bounces=0):
     """Create the temporary Cycles scene for ``spec``; returns (scene, created) where ``created`` lists
     (collection_name, ID) pairs in the order they must be removed. The caller removes them."""
     created = []
     scene = bpy.data.scenes.new(f"{_PREFIX} {spec.name}")
     created.append(("scenes", scene))
     try:
-        _configure(scene, spec, samples, seed, material_uses_osl(material))
+        _configure(scene, spec, samples, seed, material_uses_osl(material), bounces)
 
         # --- object
         mesh = bpy.data.meshes.new(f"{_PREFIX} {spec.kind}")
@@ -242,20 +241,22 @@ def _remove(created):
             pass
 
 
-def render_cycles(material, scene_spec, samples, seed, out_exr_path):
+def render_cycles(material, scene_spec, samples, seed, out_exr_path, bounces=0):
     """Render ``scene_spec`` with ``material`` in Cycles (CPU).
 
     Writes a 32-bit float RGBA EXR to ``out_exr_path`` (atomically: rendered to a temporary file in the
     same folder, then renamed) and returns ``(image, seconds)``: ``image`` H x W x 3 float64 linear
     radiance with row 0 at the TOP (like ``reference_image``), ``seconds`` the wall time of the render
     call (scene sync, kernel set-up and sampling). The user's scenes, settings and data are unchanged.
+    ``bounces``: light bounces after the first interaction (0, the default: direct light only, which for a volume
+    is its single scattering; volumes need many for their multiple scattering).
     """
     if samples < 1:
         raise ValueError("samples must be >= 1")
     images_before = {im.name_full for im in bpy.data.images}
     created = []
     try:
-        scene, created = build_scene(material, scene_spec, samples, seed)
+        scene, created = build_scene(material, scene_spec, samples, seed, bounces)
         with atomic_path(out_exr_path) as tmp:
             scene.render.filepath = tmp
             t0 = time.perf_counter()
