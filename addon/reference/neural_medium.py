@@ -16,6 +16,7 @@ above ALBEDO_MAX are taken at ALBEDO_MAX: the networks never saw them) and (g + 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -92,3 +93,123 @@ def table_energy(phi_table: np.ndarray, rho_edges, z_edges) -> float:
     r, z = np.asarray(rho_edges, dtype=np.float64), np.asarray(z_edges, dtype=np.float64)
     volumes = np.pi * np.outer(np.diff(r * r), np.diff(z))
     return float(np.einsum("ijkl,ij,kl->", phi_table, volumes, bin_solid_angles(*phi_table.shape[2:])))
+
+
+# ------------------------------------------------------------------------------------------ tables and the gather
+
+@dataclass(frozen=True)
+class Table:
+    """Phi of one kind (``double`` or ``multiple``) for one material on a grid: ``values`` (n_rho, n_z, n_theta,
+    n_phi) per unit volume (mfp^3) per unit source power, the cells' edges in mfp and the direction bin centres."""
+
+    values: np.ndarray
+    rho_edges: np.ndarray
+    z_edges: np.ndarray
+    theta: np.ndarray
+    phi: np.ndarray
+
+    def lookup(self, rho, z, theta, phi) -> np.ndarray:
+        """Phi at points (rho, z in mfp) and folded directions: multilinear between the cells' centres in the encoded
+        (sinh) coordinates and between the bin centres (clamped at the ends); 0 outside the table."""
+        rho_c, z_c = cell_centres(self.rho_edges, self.z_edges)
+        axes = [_linear(_sinh_unit(rho_c, ENCODING["scale"], ENCODING["rho_max"]),
+                        _sinh_unit(rho, ENCODING["scale"], ENCODING["rho_max"])),
+                _linear(_sinh_unit(z_c, ENCODING["scale"], ENCODING["z_max"]),
+                        _sinh_unit(z, ENCODING["scale"], ENCODING["z_max"])),
+                _linear(self.theta, theta), _linear(self.phi, phi)]
+        out = np.zeros(np.shape(rho))
+        for corner in range(16):
+            index, weight = [], 1.0
+            for a, (i, w) in enumerate(axes):
+                upper = (corner >> a) & 1
+                index.append(i + upper)
+                weight = weight * (w if upper else 1.0 - w)
+            out += weight * self.values[tuple(index)]
+        inside = (rho <= self.rho_edges[-1]) & (z >= self.z_edges[0]) & (z <= self.z_edges[-1])
+        return np.where(inside, out, 0.0)
+
+
+def _linear(nodes: np.ndarray, x):
+    """(lower index, weight of the upper node) of x between sorted ``nodes``, clamped to the first and last."""
+    nodes = np.asarray(nodes, dtype=np.float64)
+    if len(nodes) == 1:
+        return np.zeros(np.shape(x), dtype=int), np.zeros(np.shape(x))
+    i = np.clip(np.searchsorted(nodes, x) - 1, 0, len(nodes) - 2)
+    return i, np.clip((x - nodes[i]) / (nodes[i + 1] - nodes[i]), 0.0, 1.0)
+
+
+def dataset_tables(path) -> dict:
+    """{"double": Table, "multiple": Table} of one file of ``training.medium_dataset`` (the Monte Carlo tables)."""
+    with np.load(path) as f:
+        edges = (f["rho_edges"], f["z_edges"], f["theta"], f["phi"])
+        return {kind: Table(f[kind].astype(np.float64), *edges) for kind in KINDS}
+
+
+def _bounding_sphere(shape) -> tuple[np.ndarray, float]:
+    if hasattr(shape, "radius"):
+        return np.asarray(shape.centre, dtype=np.float64), float(shape.radius)
+    if hasattr(shape, "lo"):
+        lo, hi = np.asarray(shape.lo), np.asarray(shape.hi)
+        return 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo))
+    raise ValueError(f"the gather needs a bounded shape (a sphere or a box), got {type(shape).__name__}")
+
+
+def beam_sources(shape, sun, cells: int) -> tuple[np.ndarray, float]:
+    """Where the sun's parallel light enters ``shape``: a ``cells`` x ``cells`` grid of beams over the shape's
+    bounding disc seen from the sun, each a point-directional source of power E x its cell's area (Sec. 3.8's
+    virtual ray lights for a sun). Returns (entry points (M, 3), power per source)."""
+    direction, irradiance = (np.asarray(sun.direction, dtype=np.float64), float(sun.irradiance))
+    d = -direction / np.linalg.norm(direction)
+    centre, radius = _bounding_sphere(shape)
+    a = np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(d, a)
+    u = ((np.arange(cells) + 0.5) / cells * 2.0 - 1.0) * radius
+    U, V = (x.ravel() for x in np.meshgrid(u, u))
+    starts = centre + U[:, None] * a + V[:, None] * b - 2.0 * radius * d
+    t0, t1 = shape.interval(starts, np.tile(d, (len(U), 1)))
+    hit = np.isfinite(t0) & (t1 > t0)
+    return starts[hit] + t0[hit, None] * d, irradiance * (2.0 * radius / cells) ** 2
+
+
+def gather(tables: dict, mean_free_path: float, shape, suns, origins, directions, kinds=KINDS, cells: int = 48,
+           steps: int = 24, chunk: int = 16) -> dict:
+    """Radiance reaching ``origins`` along the rays ``-directions`` (camera rays: origins outside the shape,
+    ``directions`` into it) from the double and multiple scattering of the suns' light, one channel: the camera
+    segment inside the shape integrated with ``steps`` points of the exponential's quantiles,
+    L = Integral exp(-s / l) Phi(x(s), -d) ds, and Phi(x, w) = Sum over beam sources of power x table(rho, z, theta,
+    phi) / l^3 (``tables``: kind -> Table of this channel's albedo and g; lengths in the table are mean free paths
+    ``l`` = ``mean_free_path`` scene units). The infinite-medium tables also count light that in the object would
+    have left it: the method's approximation (Sec. 3.2), measured against the ground truth in docs/accuracy.md."""
+    ell = float(mean_free_path)
+    origins, directions = np.asarray(origins, dtype=np.float64), np.asarray(directions, dtype=np.float64)
+    out = {kind: np.zeros(len(origins)) for kind in kinds}
+    t0, t1 = shape.interval(origins, directions)
+    rows = np.flatnonzero(np.isfinite(t0) & (t1 > t0))
+    q = (np.arange(steps) + 0.5) / steps
+    for sun in suns:
+        entries, power = beam_sources(shape, sun, cells)
+        d = -np.asarray(sun.direction, dtype=np.float64)
+        d /= np.linalg.norm(d)
+        for start in range(0, len(rows), chunk):
+            r = rows[start:start + chunk]
+            tau = (t1[r] - t0[r]) / ell
+            reach = -np.expm1(-tau)  # the probability of a collision along the segment
+            s = -np.log1p(-q[None, :] * reach[:, None]) * ell  # (R, S) quantiles of exp(-s / l) on the segment
+            weight = reach * ell / steps  # Integral exp(-s / l) f ds = sum weight f(s)
+            x = origins[r, None, :] + (t0[r, None] + s)[..., None] * directions[r, None, :]
+            v = x[:, :, None, :] - entries[None, None, :, :]
+            z = v @ d
+            radial = v - z[..., None] * d
+            rho = np.linalg.norm(radial, axis=-1)
+            e_rho = np.where((rho > 1e-12)[..., None], radial / np.maximum(rho, 1e-12)[..., None],
+                             np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0]))
+            w = -directions[r]  # the light's propagation direction towards the camera
+            cos_theta = np.clip(w @ d, -1.0, 1.0)
+            theta = np.broadcast_to(np.arccos(cos_theta)[:, None, None], rho.shape)
+            phi = np.abs(np.arctan2(np.einsum("rsmk,rk->rsm", np.cross(d, e_rho), w),
+                                    np.einsum("rsmk,rk->rsm", e_rho, w)))
+            for kind in kinds:
+                value = tables[kind].lookup(rho / ell, z / ell, theta, phi).sum(axis=2) / ell ** 3
+                out[kind][r] += weight * power * value.sum(axis=1)
+    return out

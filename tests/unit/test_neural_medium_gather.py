@@ -1,0 +1,83 @@
+"""The neural medium's gather (reference/neural_medium.py): Monte Carlo tables of an infinite medium, gathered along
+camera rays from the sun's beams into a sphere, against the independent path tracer (neural_medium_truth).
+
+Double scattering happens near the beam, where the object's boundary matters little: the gather reproduces the
+truth's order 2. Multiple scattering travels further: the infinite-medium table also counts light that would
+have left the object, so the gather can only overestimate it (the method's approximation, Sec. 3.2; measured by
+training/medium_gather_check.py)."""
+import numpy as np
+import pytest
+
+from addon import presets
+from addon.models import neural_medium as model
+from addon.reference import neural_medium as nm
+from addon.reference import neural_medium_truth as truth
+from addon.reference import scenes as S
+from training import medium_tracer as mt
+
+SCENE = S.sphere_scene(resolution=12)
+CLOUD = model.params_from_dict({**presets.load(model.ID, "cloud"), "scale": 0.5})  # 4.4 mfp across
+
+
+@pytest.fixture(scope="module")
+def cloud():
+    """The cloud's Monte Carlo tables (albedo 0.909, g 0), the gather on the 12 px sphere, and the truth there."""
+    r = mt.simulate(CLOUD.albedo[0], CLOUD.g, mt.default_grid(), mt.Settings(photons=60_000, double_photons=600_000,
+                                                                             batches=4), seed=[5])
+    grid = mt.default_grid()
+    edges = (np.asarray(grid.rho_edges), np.asarray(grid.z_edges), grid.theta_centres(), grid.phi_centres())
+    tables = {kind: nm.Table(r[kind], *edges) for kind in nm.KINDS}
+    origins, directions = truth.camera_rays(SCENE, truth.Sphere())
+    gathered = nm.gather(tables, CLOUD.mean_free_path[0], truth.Sphere(), SCENE.suns, origins, directions,
+                         cells=32, steps=16)
+    t = truth.render(CLOUD, truth.Sphere(), SCENE, 1024, seed=11)
+    mask = (S.scene_mask(SCENE) & t["mask"]).ravel()
+    return tables, gathered, t, mask
+
+
+def _mean(image, mask):
+    return image[..., 0].ravel()[mask].mean()
+
+
+def test_double_scattering_is_the_truths_order_2(cloud):
+    _, gathered, t, mask = cloud
+    assert gathered["double"][mask].mean() == pytest.approx(_mean(t["order2"], mask), rel=0.05)
+
+
+def test_the_infinite_medium_can_only_add_multiple_scattering(cloud):
+    _, gathered, t, mask = cloud
+    noise = np.sqrt(np.mean(t["noise"]["multiple"][..., 0].ravel()[mask] ** 2))
+    assert gathered["multiple"][mask].mean() > _mean(t["multiple"], mask) + 3.0 * noise / np.sqrt(mask.sum())
+
+
+def test_the_gather_is_linear_in_the_sun_and_zero_off_the_object(cloud):
+    tables, _, _, _ = cloud
+    origins, directions = truth.camera_rays(SCENE, truth.Sphere())
+    brighter = [S.Sun(SCENE.suns[0].direction, 3.0)]
+    a = nm.gather(tables, CLOUD.mean_free_path[0], truth.Sphere(), SCENE.suns, origins, directions, cells=16, steps=8)
+    b = nm.gather(tables, CLOUD.mean_free_path[0], truth.Sphere(), brighter, origins, directions, cells=16, steps=8)
+    for kind in nm.KINDS:
+        np.testing.assert_allclose(b[kind], 3.0 * a[kind], rtol=1e-12)
+        assert np.all(a[kind] >= 0.0) and np.all(np.isfinite(a[kind]))
+    missed = ~np.isfinite(truth.Sphere().interval(origins, directions)[0])
+    assert missed.any() and all(np.all(a[kind][missed] == 0.0) for kind in nm.KINDS)
+
+
+def test_table_lookup_interpolates_and_is_zero_outside(cloud):
+    tables, _, _, _ = cloud
+    table = tables["double"]
+    rho_c, z_c = nm.cell_centres(table.rho_edges, table.z_edges)
+    i, j, k, m = 3, 45, 4, 7
+    exact = table.lookup(np.array([rho_c[i]]), np.array([z_c[j]]), np.array([table.theta[k]]),
+                         np.array([table.phi[m]]))
+    assert exact[0] == pytest.approx(table.values[i, j, k, m], rel=1e-9)
+    mid = table.lookup(np.array([rho_c[i]]), np.array([z_c[j]]), np.array([0.5 * (table.theta[k] + table.theta[k + 1])]),
+                       np.array([table.phi[m]]))
+    assert mid[0] == pytest.approx(0.5 * (table.values[i, j, k, m] + table.values[i, j, k + 1, m]), rel=1e-9)
+    outside = table.lookup(np.array([1e4]), np.array([0.0]), np.array([1.0]), np.array([1.0]))
+    assert outside[0] == 0.0
+
+
+def test_an_unbounded_shape_is_refused():
+    with pytest.raises(ValueError, match="bounded shape"):
+        nm.beam_sources(truth.Slab(), SCENE.suns[0], 8)
