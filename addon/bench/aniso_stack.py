@@ -23,7 +23,7 @@ from ..models.metals import METALS
 from ..reference import aniso_stack as reference
 from ..reference import aniso_stack_truth as truth
 from ..reference.frames import spherical
-from .common import pct, preset_render_times, reference_throughput, timed
+from .common import approximation_rows, pct, preset_render_times, preset_rows, reference_throughput, timed
 
 MODEL = model.ID
 GRID_STACKS = 200
@@ -215,7 +215,29 @@ def accuracy(sizes) -> str:
         lines.append(f"| {case} | {v['views']} | {v['lobes']} | {pct(v['albedo'][0])} / {pct(v['albedo'][1])} | "
                      f"{pct(v['energy'][0])} / {pct(v['energy'][1])} | {v['axis'][0]:.1f} / {v['axis'][1]:.1f} | "
                      f"{pct(v['major'][0])} / {pct(v['major'][1])} | {pct(v['minor'][0])} / {pct(v['minor'][1])} |")
-    return "\n".join(lines + preset_truth_section(sizes.resolution)) + "\n"
+    return "\n".join(lines + preset_truth_section(sizes.resolution) + mapping_section(sizes.resolution)) + "\n"
+
+
+def mapping_section(resolution: int) -> list[str]:
+    """The Cycles mapping against the model: each named approximation on its isolating configuration (Blender 4.2's
+    node group, which has no Metallic BSDF node, predicted as 4.2 builds it), then every preset."""
+    from ..nodes import aniso_stack as mapping
+    from ..nodes.expr import NumpyBackend
+
+    lines = ["", "## Named approximations of the Cycles mapping", "",
+             "Relative RMSE of the form's numpy prediction against the model (the float64 reference) on a "
+             "configuration chosen to feature each approximation; Cycles renders these predictions "
+             "(tests/blender/test_aniso_stack_cycles.py). The Blender 4.2 row predicts the node group as Blender 4.2 "
+             "builds it; the others as 4.3+ does.", "",
+             "| approximation | what it does | scene | ref. mean | OSL | node group |", "|---|---|---|---|---|---|"]
+    blender_42 = "top-fresnel-mean-blender-4.2"
+    rows = approximation_rows(model, {k: v for k, v in mapping.APPROXIMATIONS.items() if k != blender_42}, resolution)
+    NumpyBackend.metallic_node = False
+    try:
+        rows += approximation_rows(model, {blender_42: mapping.APPROXIMATIONS[blender_42]}, resolution)
+    finally:
+        NumpyBackend.metallic_node = True
+    return lines + rows + preset_rows(model, resolution)
 
 
 # ------------------------------------------------------------------------------------------ speed
