@@ -32,7 +32,7 @@ import numpy as np
 
 from addon.bake import layer_rows
 from addon.bake.exr import atomic_path
-from addon.bake.validation import ARRAYS, load_shards
+from addon.bake.validation import load_shards
 from addon.reference import spongecake as reference
 from addon.reference.frames import spherical
 

@@ -27,7 +27,7 @@ from . import scenes as ref_scenes
 from . import spongecake as reference
 from .montecarlo import nearest, sampled_pixels
 
-__all__ = ["TruthSettings", "sampled_pixels", "multiple_scattering_truth", "relative_noise", "single_scattering"]
+__all__ = ["TruthSettings", "multiple_scattering_truth", "single_scattering"]
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,6 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from addon import presets  # noqa: E402
 from addon.bake import exr  # noqa: E402
 from addon.models import spongecake as model  # noqa: E402
 from addon.nodes import material, osl, texture_wiring  # noqa: E402

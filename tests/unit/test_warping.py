@@ -20,8 +20,7 @@ lobe cannot follow it; the paper's "visually identical" holds for the peak (with
 import numpy as np
 import pytest
 
-from addon.reference import vmf, warping
-from addon.reference.frames import dot
+from addon.reference import warping
 
 Z = np.array([0.0, 0.0, 1.0])
 EXAMPLES = warping.FIGURE_EXAMPLES
