@@ -12,7 +12,7 @@ import re
 import sys
 
 from . import paths, presets
-from .models import MODELS
+from .models import MODELS, REGISTRY
 from .models.params import ParamError
 from .nodes import FORMS, principled_models
 from .reference import truth_models
@@ -42,7 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True)
 
     lp = sub.add_parser("list-presets", help="list the presets of a model")
-    lp.add_argument("--model", default="spongecake", choices=sorted(MODELS))
+    lp.add_argument("--model", default="spongecake", choices=sorted(REGISTRY))
 
     mm = sub.add_parser("make-material", help="write a .blend with a Lamina material on a sphere")
     _material_args(mm)
@@ -117,6 +117,21 @@ def build_parser() -> argparse.ArgumentParser:
     ad.add_argument("--form", default="nodes", choices=FORMS)
     ad.add_argument("--out", help="the .blend to write (refused if it exists, see --overwrite)")
     ad.add_argument("--overwrite", action="store_true",
+                    help="replace an existing --out; without --out, save over --blend")
+
+    bm = sub.add_parser("bake-medium", help="fill a closed mesh of a .blend with a neural medium (or keep the medium "
+                                            "material it has), bake its double and multiple scattering from the "
+                                            "scene's lamps and save the .blend")
+    bm.add_argument("--blend", required=True, help="the .blend to open")
+    bm.add_argument("--object", required=True, help="the mesh object the medium fills")
+    g = bm.add_mutually_exclusive_group()
+    g.add_argument("--preset", help="a neural_medium preset (list-presets --model neural_medium): a new material")
+    g.add_argument("--json", help="a JSON file with a neural_medium dict: a new material")
+    bm.add_argument("--scale", type=float, help="with --preset or --json: scene units per unit length")
+    bm.add_argument("--cells", type=int, default=16, help="beams per lamp side (cells x cells per lamp)")
+    bm.add_argument("--steps", type=int, default=12, help="quadrature points along each gathering ray")
+    bm.add_argument("--out", help="the .blend to write (refused if it exists, see --overwrite)")
+    bm.add_argument("--overwrite", action="store_true",
                     help="replace an existing --out; without --out, save over --blend")
     return ap
 
@@ -384,8 +399,48 @@ def cmd_add_porous(args) -> int:
     return 0
 
 
+def _medium_dict(args) -> dict | None:
+    """The medium of --preset / --json (with --scale), checked and its warnings printed before the .blend is opened;
+    None without either (the object's own medium material is baked)."""
+    from .models import neural_medium
+
+    if args.preset is None and args.json is None:
+        if args.scale is not None:
+            raise CliError("--scale needs --preset or --json")
+        return None
+    data = _read_dict(neural_medium.ID, args.preset, args.json, "--json")
+    if not isinstance(data, dict):
+        raise CliError(f"--json {args.json!r}: expected a JSON object (a neural_medium dict)")
+    if args.scale is not None:
+        data = {**data, "scale": args.scale}
+    _validated(neural_medium, data)
+    return data
+
+
+def cmd_bake_medium(args) -> int:
+    from .bake import neural_medium as nb
+
+    data = _medium_dict(args)
+    try:
+        settings = nb.Settings(args.cells, args.steps)
+    except ValueError as e:
+        raise CliError(str(e)) from None
+    blend, out = _blend_paths(args)
+    from .operators import blend_io, medium_bake
+    from .operators import neural_medium as medium_ops
+
+    try:
+        summary, warnings = medium_ops.bake_medium_file(blend, args.object, data, out, settings)
+    except (blend_io.BlendArgumentError, medium_bake.BakeError) as e:  # nothing was written
+        raise CliError(str(e)) from None
+    _warn(warnings)
+    print(f"lamina: {summary}; wrote {out}")
+    return 0
+
+
 COMMANDS = {"list-presets": cmd_list_presets, "make-material": cmd_make_material, "compare": cmd_compare,
-            "demo": cmd_demo, "bench": cmd_bench, "bake": cmd_bake, "add-porous": cmd_add_porous}
+            "demo": cmd_demo, "bench": cmd_bench, "bake": cmd_bake, "add-porous": cmd_add_porous,
+            "bake-medium": cmd_bake_medium}
 
 # Lamina's temporary names (``bake.exr.atomic_path``'s ".<name>.<random>.tmp.<ext>", ``paths.staged_folder``'s
 # ".<name>.<random>.lamina-tmp"): a message shows the final name instead.

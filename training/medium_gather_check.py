@@ -31,7 +31,8 @@ def measure(name: str, scale: float, channel: int = 1) -> dict:
     tables = {kind: nm.Table(r[kind], *edges) for kind in nm.KINDS}
     scene = S.sphere_scene(resolution=RESOLUTION)
     origins, directions = truth.camera_rays(scene, truth.Sphere())
-    gathered = nm.gather(tables, p.mean_free_path[channel], truth.Sphere(), scene.suns, origins, directions)
+    beams = nm.Beams.join(nm.sun_beams(truth.Sphere(), sun, 48) for sun in scene.suns)
+    gathered = nm.gather(tables, p.mean_free_path[channel], truth.Sphere(), beams, origins, directions)
     t = truth.render(p, truth.Sphere(), scene, PATHS, seed=3)
     mask = (S.scene_mask(scene) & t["mask"]).ravel()
     out = {"preset": name, "scale": scale, "across": float(truth.optical_depth(p, 2.0)[channel]),

@@ -4,10 +4,10 @@ import importlib
 
 import bpy
 
-from ..models import MODELS
+from ..models import REGISTRY
 from . import bake_ops, compare_op, material_ops, ms_ops
 
-MODEL_OPERATORS = {model_id: importlib.import_module(f".{model_id}", __name__) for model_id in MODELS}
+MODEL_OPERATORS = {model_id: importlib.import_module(f".{model_id}", __name__) for model_id in REGISTRY}
 
 classes = (
     compare_op.LaminaCompareSettings,

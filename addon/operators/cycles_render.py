@@ -241,7 +241,7 @@ def _remove(created):
             pass
 
 
-def render_cycles(material, scene_spec, samples, seed, out_exr_path, bounces=0):
+def render_cycles(material, scene_spec, samples, seed, out_exr_path, bounces=0, prepare=None):
     """Render ``scene_spec`` with ``material`` in Cycles (CPU).
 
     Writes a 32-bit float RGBA EXR to ``out_exr_path`` (atomically: rendered to a temporary file in the
@@ -249,7 +249,8 @@ def render_cycles(material, scene_spec, samples, seed, out_exr_path, bounces=0):
     radiance with row 0 at the TOP (like ``reference_image``), ``seconds`` the wall time of the render
     call (scene sync, kernel set-up and sampling). The user's scenes, settings and data are unchanged.
     ``bounces``: light bounces after the first interaction (0, the default: direct light only, which for a volume
-    is its single scattering; volumes need many for their multiple scattering).
+    is its single scattering; volumes need many for their multiple scattering). ``prepare(scene, obj)`` runs on the
+    temporary scene and its object before the render (e.g. a medium's bake into the object's mesh).
     """
     if samples < 1:
         raise ValueError("samples must be >= 1")
@@ -257,6 +258,8 @@ def render_cycles(material, scene_spec, samples, seed, out_exr_path, bounces=0):
     created = []
     try:
         scene, created = build_scene(material, scene_spec, samples, seed, bounces)
+        if prepare is not None:
+            prepare(scene, next(o for o in scene.objects if o.type == "MESH"))
         with atomic_path(out_exr_path) as tmp:
             scene.render.filepath = tmp
             t0 = time.perf_counter()

@@ -145,71 +145,127 @@ def dataset_tables(path) -> dict:
         return {kind: Table(f[kind].astype(np.float64), *edges) for kind in KINDS}
 
 
-def _bounding_sphere(shape) -> tuple[np.ndarray, float]:
+def bounding_sphere(shape) -> tuple[np.ndarray, float]:
+    """(centre, radius) of a sphere holding ``shape``: a Sphere or Box of the truth, or any shape with a
+    ``bounding_sphere`` attribute (e.g. the bake's mesh)."""
+    if hasattr(shape, "bounding_sphere"):
+        centre, radius = shape.bounding_sphere
+        return np.asarray(centre, dtype=np.float64), float(radius)
     if hasattr(shape, "radius"):
         return np.asarray(shape.centre, dtype=np.float64), float(shape.radius)
     if hasattr(shape, "lo"):
         lo, hi = np.asarray(shape.lo), np.asarray(shape.hi)
         return 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo))
-    raise ValueError(f"the gather needs a bounded shape (a sphere or a box), got {type(shape).__name__}")
+    raise ValueError(f"the gather needs a bounded shape (a sphere, a box or a mesh), got {type(shape).__name__}")
 
 
-def beam_sources(shape, sun, cells: int) -> tuple[np.ndarray, float]:
-    """Where the sun's parallel light enters ``shape``: a ``cells`` x ``cells`` grid of beams over the shape's
-    bounding disc seen from the sun, each a point-directional source of power E x its cell's area (Sec. 3.8's
-    virtual ray lights for a sun). Returns (entry points (M, 3), power per source)."""
-    direction, irradiance = (np.asarray(sun.direction, dtype=np.float64), float(sun.irradiance))
-    d = -direction / np.linalg.norm(direction)
-    centre, radius = _bounding_sphere(shape)
+@dataclass(frozen=True)
+class Beams:
+    """Virtual ray lights (Sec. 3.8): where each beam of a lamp enters the medium (M, 3), its unit direction (M, 3)
+    and its power (M,), each a point-directional source of the tables."""
+
+    entries: np.ndarray
+    directions: np.ndarray
+    powers: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.powers)
+
+    @staticmethod
+    def join(parts) -> "Beams":
+        parts = list(parts)
+        if not parts:
+            return Beams(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+        return Beams(*(np.concatenate([getattr(b, f) for b in parts]) for f in ("entries", "directions", "powers")))
+
+
+def _orthonormal(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     a = np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0])
     a /= np.linalg.norm(a)
-    b = np.cross(d, a)
+    return a, np.cross(d, a)
+
+
+def _entering(shape, starts, directions, powers) -> Beams:
+    """The beams from ``starts`` along ``directions`` that hit ``shape``, moved to where they enter it."""
+    t0, t1 = shape.interval(starts, directions)
+    hit = np.isfinite(t0) & (t1 > t0)
+    return Beams(starts[hit] + np.maximum(t0[hit], 0.0)[:, None] * directions[hit], directions[hit], powers[hit])
+
+
+def sun_beams(shape, sun, cells: int) -> Beams:
+    """A sun's parallel light as a ``cells`` x ``cells`` grid of beams over the shape's bounding disc seen from the
+    sun, each of power E x its cell's area."""
+    d = -np.asarray(sun.direction, dtype=np.float64)
+    d /= np.linalg.norm(d)
+    centre, radius = bounding_sphere(shape)
+    a, b = _orthonormal(d)
     u = ((np.arange(cells) + 0.5) / cells * 2.0 - 1.0) * radius
     U, V = (x.ravel() for x in np.meshgrid(u, u))
     starts = centre + U[:, None] * a + V[:, None] * b - 2.0 * radius * d
-    t0, t1 = shape.interval(starts, np.tile(d, (len(U), 1)))
-    hit = np.isfinite(t0) & (t1 > t0)
-    return starts[hit] + t0[hit, None] * d, irradiance * (2.0 * radius / cells) ** 2
+    powers = np.full(len(U), float(sun.irradiance) * (2.0 * radius / cells) ** 2)
+    return _entering(shape, starts, np.tile(d, (len(U), 1)), powers)
 
 
-def gather(tables: dict, mean_free_path: float, shape, suns, origins, directions, kinds=KINDS, cells: int = 48,
-           steps: int = 24, chunk: int = 16) -> dict:
+def point_beams(shape, position, intensity: float, cells: int) -> Beams:
+    """A point lamp of radiant ``intensity`` (W/sr) outside the shape: beams through a ``cells`` x ``cells`` grid of
+    equal-solid-angle directions over the cone that holds the bounding sphere, each of power intensity x its solid
+    angle."""
+    position = np.asarray(position, dtype=np.float64)
+    centre, radius = bounding_sphere(shape)
+    axis = centre - position
+    distance = float(np.linalg.norm(axis))
+    if distance <= radius:
+        raise ValueError("a point light inside the medium's bounding sphere: move it outside the object")
+    axis /= distance
+    cos_max = math.sqrt(1.0 - (radius / distance) ** 2)
+    a, b = _orthonormal(axis)
+    u = (np.arange(cells) + 0.5) / cells
+    U, V = (x.ravel() for x in np.meshgrid(u, u))
+    cos_t = 1.0 - U * (1.0 - cos_max)  # uniform in solid angle over the cone
+    sin_t, phi = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0)), 2.0 * math.pi * V
+    directions = (cos_t[:, None] * axis + (sin_t * np.cos(phi))[:, None] * a + (sin_t * np.sin(phi))[:, None] * b)
+    solid_angle = 2.0 * math.pi * (1.0 - cos_max) / len(U)
+    return _entering(shape, np.tile(position, (len(U), 1)), directions, np.full(len(U), intensity * solid_angle))
+
+
+def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, directions, kinds=KINDS,
+           steps: int = 24, chunk: int = 16, progress=None) -> dict:
     """Radiance reaching ``origins`` along the rays ``-directions`` (camera rays: origins outside the shape,
-    ``directions`` into it) from the double and multiple scattering of the suns' light, one channel: the camera
-    segment inside the shape integrated with ``steps`` points of the exponential's quantiles,
-    L = Integral exp(-s / l) Phi(x(s), -d) ds, and Phi(x, w) = Sum over beam sources of power x table(rho, z, theta,
-    phi) / l^3 (``tables``: kind -> Table of this channel's albedo and g; lengths in the table are mean free paths
+    ``directions`` into it) from the double and multiple scattering of the ``beams``' light, one channel: the first
+    segment of the camera ray inside the shape integrated with ``steps`` points of the exponential's quantiles,
+    L = Integral exp(-s / l) Phi(x(s), -d) ds, and Phi(x, w) = Sum over beams of power x table(rho, z, theta, phi) /
+    l^3 (``tables``: kind -> Table of this channel's albedo and g; lengths in the table are mean free paths
     ``l`` = ``mean_free_path`` scene units). The infinite-medium tables also count light that in the object would
-    have left it: the method's approximation (Sec. 3.2), measured against the ground truth in docs/accuracy.md."""
+    have left it: the method's approximation (Sec. 3.2), measured against the ground truth in docs/training.md.
+    ``progress(done, total)`` is called after each chunk of rays."""
     ell = float(mean_free_path)
     origins, directions = np.asarray(origins, dtype=np.float64), np.asarray(directions, dtype=np.float64)
     out = {kind: np.zeros(len(origins)) for kind in kinds}
     t0, t1 = shape.interval(origins, directions)
     rows = np.flatnonzero(np.isfinite(t0) & (t1 > t0))
     q = (np.arange(steps) + 0.5) / steps
-    for sun in suns:
-        entries, power = beam_sources(shape, sun, cells)
-        d = -np.asarray(sun.direction, dtype=np.float64)
-        d /= np.linalg.norm(d)
-        for start in range(0, len(rows), chunk):
-            r = rows[start:start + chunk]
-            tau = (t1[r] - t0[r]) / ell
-            reach = -np.expm1(-tau)  # the probability of a collision along the segment
-            s = -np.log1p(-q[None, :] * reach[:, None]) * ell  # (R, S) quantiles of exp(-s / l) on the segment
-            weight = reach * ell / steps  # Integral exp(-s / l) f ds = sum weight f(s)
-            x = origins[r, None, :] + (t0[r, None] + s)[..., None] * directions[r, None, :]
-            v = x[:, :, None, :] - entries[None, None, :, :]
-            z = v @ d
-            radial = v - z[..., None] * d
-            rho = np.linalg.norm(radial, axis=-1)
-            e_rho = np.where((rho > 1e-12)[..., None], radial / np.maximum(rho, 1e-12)[..., None],
-                             np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0]))
-            w = -directions[r]  # the light's propagation direction towards the camera
-            cos_theta = np.clip(w @ d, -1.0, 1.0)
-            theta = np.broadcast_to(np.arccos(cos_theta)[:, None, None], rho.shape)
-            phi = np.abs(np.arctan2(np.einsum("rsmk,rk->rsm", np.cross(d, e_rho), w),
-                                    np.einsum("rsmk,rk->rsm", e_rho, w)))
-            for kind in kinds:
-                value = tables[kind].lookup(rho / ell, z / ell, theta, phi).sum(axis=2) / ell ** 3
-                out[kind][r] += weight * power * value.sum(axis=1)
+    entries, beam_d, powers = beams.entries, beams.directions, beams.powers
+    fallback = np.stack([_orthonormal(d)[0] for d in beam_d]) if len(beams) else np.zeros((0, 3))
+    for start in range(0, len(rows), chunk):
+        r = rows[start:start + chunk]
+        tau = (t1[r] - t0[r]) / ell
+        reach = -np.expm1(-tau)  # the probability of a collision along the segment
+        s = -np.log1p(-q[None, :] * reach[:, None]) * ell  # (R, S) quantiles of exp(-s / l) on the segment
+        weight = reach * ell / steps  # Integral exp(-s / l) f ds = sum weight f(s)
+        x = origins[r, None, :] + (np.maximum(t0[r], 0.0)[:, None] + s)[..., None] * directions[r, None, :]
+        v = x[:, :, None, :] - entries[None, None, :, :]  # (R, S, M, 3)
+        z = np.einsum("rsmk,mk->rsm", v, beam_d)
+        radial = v - z[..., None] * beam_d
+        rho = np.linalg.norm(radial, axis=-1)
+        e_rho = np.where((rho > 1e-12)[..., None], radial / np.maximum(rho, 1e-12)[..., None], fallback)
+        w = -directions[r]  # the light's propagation direction towards the camera
+        theta = np.arccos(np.clip(np.einsum("rk,mk->rm", w, beam_d), -1.0, 1.0))[:, None, :]
+        theta = np.broadcast_to(theta, rho.shape)
+        phi = np.abs(np.arctan2(np.einsum("rsmk,rk->rsm", np.cross(beam_d, e_rho), w),
+                                np.einsum("rsmk,rk->rsm", e_rho, w)))
+        for kind in kinds:
+            value = tables[kind].lookup(rho / ell, z / ell, theta, phi) @ powers / ell ** 3
+            out[kind][r] += weight * value.sum(axis=1)
+        if progress is not None:
+            progress(min(start + chunk, len(rows)), len(rows))
     return out

@@ -7,11 +7,11 @@ import importlib
 
 import bpy
 
-from ..models import MODELS
+from ..models import MEDIA, MODELS, REGISTRY
 from ..nodes import material as lamina_material
 from ..operators import MODEL_OPERATORS, compare_run
 
-MODEL_UI = {model_id: importlib.import_module(f".{model_id}", __package__) for model_id in MODELS}
+MODEL_UI = {model_id: importlib.import_module(f".{model_id}", __package__) for model_id in REGISTRY}
 
 
 class LAMINA_PT_main(bpy.types.Panel):
@@ -29,6 +29,10 @@ class LAMINA_PT_main(bpy.types.Panel):
         layout = self.layout
         mat = getattr(context, "material", None)
         _draw_add_buttons(layout.column(align=True), mat)
+        medium = next((MODEL_UI[m] for m in MEDIA if MODEL_UI[m].owns(mat)), None)
+        if medium is not None:
+            medium.draw_material(layout, context, mat)
+            return
         if not lamina_material.is_lamina(mat):
             layout.label(text="The active material is not a Lamina material", icon="INFO")
             return

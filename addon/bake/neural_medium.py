@@ -1,0 +1,144 @@
+"""Baking a neural medium's double and multiple scattering onto an object's surface (issue 13), bpy-free.
+
+What is baked. Cycles renders the medium's single scattering itself (a Volume Scatter + Absorption at
+``volume_bounces = 0``); what it leaves out is the light of orders >= 2. At a surface point x with outward normal
+n, that light leaves the object towards w (w . n > 0) with radiance
+
+    L(x, w) = Integral over the first segment of the ray entering at x against w of exp(-s / l) Phi(x - s w, w) ds
+
+where Phi is the medium's in-scattered radiance of orders >= 2 (``reference.neural_medium.gather``: the tables of
+the networks for the channel's albedo and the medium's g, from every beam of every lamp). The bake evaluates L in
+``DIRECTIONS`` directions of x's outward hemisphere and stores the least-squares linear fit (L1 spherical
+harmonics, per channel)
+
+    L(x, w) ~ c0 + cx wx + cy wy + cz wz      (world-space w, the direction towards the viewer)
+
+which the material evaluates as max(c0 + c . w, 0) on front faces. Named approximations (measured in
+docs/accuracy.md): the infinite-medium tables (they count light that would have left the object, Sec. 3.2), the
+index-matched boundary (no refraction, no Fresnel: what Cycles' volume renders too), the linear fit in w, and
+the first segment only of a ray that leaves and re-enters a non-convex object.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..reference import neural_medium as nm
+
+VERSION = 1  # of what a bake stores; bump when its meaning changes (older bakes read as stale)
+DIRECTIONS = 7  # the normal and six directions at 60 degrees around it
+COEFFICIENTS = ("c0", "cx", "cy", "cz")
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Bake resolution: beams per lamp side (``cells`` x ``cells`` beams), quadrature points along each ray."""
+
+    cells: int = 16
+    steps: int = 12
+
+    def __post_init__(self):
+        if not (1 <= self.cells <= 256 and 1 <= self.steps <= 256):
+            raise ValueError(f"bake settings out of range: cells {self.cells} (1-256), steps {self.steps} (1-256)")
+
+
+def reconstruction_grid(net) -> tuple:
+    """(rho_edges, z_edges, theta, phi) the network's tables are reconstructed on: its training grid, from the
+    weights' manifest."""
+    g = net.manifest["grid"]
+    return tuple(np.asarray(g[k], dtype=np.float64) for k in ("rho_edges", "z_edges", "theta", "phi"))
+
+
+def channel_tables(p, folder=nm.WEIGHTS) -> list[dict]:
+    """Per RGB channel, {kind: Table} reconstructed from the shipped networks for the channel's albedo and the
+    medium's g (Sec. 3.7); channels with the same albedo share their tables."""
+    nets = {kind: nm.network(kind, folder) for kind in nm.KINDS}
+    done: dict = {}
+    out = []
+    for albedo in p.albedo:
+        if albedo not in done:
+            done[albedo] = {kind: nm.Table(nm.table(net, albedo, p.g, *reconstruction_grid(net)),
+                                           *reconstruction_grid(net)) for kind, net in nets.items()}
+        out.append(done[albedo])
+    return out
+
+
+def hemisphere_directions(normals: np.ndarray) -> np.ndarray:
+    """(N, DIRECTIONS, 3) unit directions about each unit normal: the normal and six at 60 degrees around it."""
+    n = np.asarray(normals, dtype=np.float64)
+    helper = np.where(np.abs(n[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    a = np.cross(n, helper)
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    b = np.cross(n, a)
+    phi = 2.0 * math.pi * np.arange(DIRECTIONS - 1) / (DIRECTIONS - 1)
+    ring = (0.5 * n[:, None, :] + math.sqrt(0.75) * (np.cos(phi)[None, :, None] * a[:, None, :]
+                                                     + np.sin(phi)[None, :, None] * b[:, None, :]))
+    return np.concatenate([n[:, None, :], ring], axis=1)
+
+
+def fit_linear(directions: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(N, 4) least-squares (c0, cx, cy, cz) of values (N, K) ~ c0 + c . w over the directions (N, K, 3)."""
+    design = np.concatenate([np.ones(directions.shape[:2] + (1,)), directions], axis=2)  # (N, K, 4)
+    return np.linalg.solve(np.einsum("nki,nkj->nij", design, design), np.einsum("nki,nk->ni", design, values))
+
+
+def evaluate(coefficients: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """What the material renders: max(c0 + c . w, 0) per channel; coefficients (N, 4, 3), directions (N, 3)."""
+    c = np.asarray(coefficients, dtype=np.float64)
+    return np.maximum(c[:, 0] + np.einsum("nk,nkc->nc", directions, c[:, 1:]), 0.0)
+
+
+def bake_points(p, tables: list[dict], shape, beams: list, points, normals, settings: Settings = Settings(),
+                progress=None, epsilon: float = 1e-4) -> np.ndarray:
+    """(N, 4, 3) coefficients (c0, cx, cy, cz per RGB channel) of the radiance of orders >= 2 leaving the surface
+    points (world space, unit outward normals) of the medium ``p`` filling ``shape`` (``interval(origins,
+    directions)`` and ``bounding_sphere`` or a truth shape), lit by ``beams`` (per channel: each lamp's beams with its
+    colour). ``progress(fraction)`` is called as
+    the work advances; it may raise to cancel."""
+    points, normals = np.asarray(points, dtype=np.float64), np.asarray(normals, dtype=np.float64)
+    directions = hemisphere_directions(normals)
+    scale = 1.0 + float(np.max(np.abs(points))) if len(points) else 1.0
+    origins = (points[:, None, :] + epsilon * scale * directions).reshape(-1, 3)
+    inward = -directions.reshape(-1, 3)
+    out = np.zeros((len(points), 4, 3))
+    for c in range(3):
+        def report(done, total, c=c):
+            if progress is not None:
+                progress((c + done / max(total, 1)) / 3.0)
+
+        radiance = nm.gather(tables[c], p.mean_free_path[c], shape, beams[c], origins, inward, steps=settings.steps,
+                             progress=report)
+        values = sum(radiance[kind] for kind in nm.KINDS).reshape(len(points), DIRECTIONS)
+        out[:, :, c] = fit_linear(directions, values)
+    return out
+
+
+def bake_key(params: dict, mesh_digest: str, lamps: list, settings: Settings, weights: str) -> str:
+    """What a bake depends on, hashed: the medium, the mesh in world space, the lamps, the settings and the
+    networks' version, numbers to 5 significant digits (a value read back from a float32 socket is the same value).
+    A changed key means the stored bake is stale."""
+    key = json.dumps({"version": VERSION, "params": _rounded(params), "mesh": mesh_digest, "lamps": _rounded(lamps),
+                      "settings": [settings.cells, settings.steps], "weights": weights}, sort_keys=True)
+    return hashlib.sha256(key.encode()).hexdigest()[:16]
+
+
+def _rounded(value):
+    if isinstance(value, float):
+        return float(f"{value:.5g}")
+    if isinstance(value, dict):
+        return {k: _rounded(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_rounded(v) for v in value]
+    return value
+
+
+def array_digest(*arrays) -> str:
+    """A short content hash of float arrays (rounded to float32, so a re-read mesh hashes the same)."""
+    h = hashlib.sha256()
+    for a in arrays:
+        h.update(np.ascontiguousarray(np.asarray(a, dtype=np.float32)).tobytes())
+    return h.hexdigest()[:16]

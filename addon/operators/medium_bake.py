@@ -1,0 +1,251 @@
+"""Baking a neural medium into an object (bpy side of ``bake/neural_medium.py``), shared by the Bake operator and
+``lamina bake-medium``.
+
+Where the bake lives. The coefficients are point attributes of the object's mesh (``nodes.neural_medium``), so a
+material shared by several objects works (each mesh carries its own light) and so does a mesh without UVs; the
+object's ``lamina_medium_bake`` property records what the bake was made for (``bake_key``), which the panel
+compares with the scene as it is now to say "stale". Linked duplicates share one mesh and so one bake: the panel
+says so. The mesh is taken before modifiers, in world space.
+
+Lamps. Suns (strength = irradiance), point and spot lamps (power P watts: radiant intensity P / (4 pi) W/sr, a spot
+masked by its cone, its blend ignored), each lamp's colour per channel; area lamps and the world are not baked
+(the operator says so). A beam whose way to its lamp is blocked by another object is dropped (``scene.ray_cast``):
+other objects shadow the light; the object's own other parts do not (its medium attenuates the beam's light as the
+tables assume).
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+
+import bmesh
+import bpy
+import numpy as np
+from mathutils import Vector
+from mathutils.bvhtree import BVHTree
+
+from ..bake import neural_medium as nb
+from ..nodes import neural_medium as medium_nodes
+from ..reference import neural_medium as nm
+
+PROPERTY = "lamina_medium_bake"
+CHUNK = 256  # surface points per step of the modal bake
+BAKED_LAMPS = ("SUN", "POINT", "SPOT")
+
+
+class BakeError(ValueError):
+    """Why an object cannot be baked, in one line for the user."""
+
+
+def mesh_problem(obj) -> str | None:
+    """Why ``obj`` cannot hold a baked medium, or None."""
+    if obj is None or obj.type != "MESH":
+        return "select a mesh object (the medium fills a closed mesh)"
+    mesh = obj.data
+    if len(mesh.polygons) == 0:
+        return f"{obj.name}: the mesh has no faces"
+    bm = bmesh.new()
+    try:
+        bm.from_mesh(mesh)
+        open_edges = sum(1 for e in bm.edges if len(e.link_faces) != 2)
+    finally:
+        bm.free()
+    if open_edges:
+        return (f"{obj.name}: the mesh is not closed ({open_edges} open or non-manifold edges); a medium needs a "
+                f"closed surface")
+    return None
+
+
+class MeshShape:
+    """A closed mesh in world space for the gather: ``interval`` of rays with it through a BVH, and a bounding
+    sphere."""
+
+    def __init__(self, obj):
+        mesh = obj.data
+        m = obj.matrix_world
+        self.vertices = [m @ v.co for v in mesh.vertices]
+        self.bvh = BVHTree.FromPolygons(self.vertices, [tuple(p.vertices) for p in mesh.polygons])
+        co = np.array([tuple(v) for v in self.vertices])
+        centre = 0.5 * (co.min(axis=0) + co.max(axis=0))
+        self.bounding_sphere = (centre, max(float(np.linalg.norm(co - centre, axis=1).max()), 1e-9))
+        self.epsilon = 1e-6 * (1.0 + float(np.abs(co).max()))
+
+    def interval(self, origins, directions):
+        """(t0, t1) of each ray's first entry into the mesh and the exit after it (inf, -inf on a miss)."""
+        origins, directions = np.atleast_2d(origins), np.atleast_2d(directions)
+        t0, t1 = np.full(len(origins), np.inf), np.full(len(origins), -np.inf)
+        for i, (o, d) in enumerate(zip(origins, directions)):
+            o, d = Vector(o), Vector(d)
+            hit, _, _, enter = self.bvh.ray_cast(o, d)
+            if hit is None:
+                continue
+            out, _, _, leave = self.bvh.ray_cast(hit + self.epsilon * d, d)
+            if out is not None:
+                t0[i], t1[i] = enter, enter + self.epsilon + leave
+        return t0, t1
+
+
+def surface_points(obj) -> tuple[np.ndarray, np.ndarray]:
+    """World-space vertex positions and unit vertex normals of the mesh."""
+    mesh = obj.data
+    n = len(mesh.vertices)
+    co = np.empty(n * 3)
+    mesh.vertices.foreach_get("co", co)
+    normals = np.array([tuple(v.normal) for v in mesh.vertices]) if n else np.zeros((0, 3))
+    m = np.array(obj.matrix_world)
+    points = co.reshape(n, 3) @ m[:3, :3].T + m[:3, 3]
+    normals = normals @ np.linalg.inv(m[:3, :3])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
+    return points, normals
+
+
+def scene_lamps(scene) -> tuple[list[dict], list[str]]:
+    """The lamps the bake uses (type, position or direction, strength, colour, spot cone) and notes on the ones it
+    leaves out."""
+    lamps, notes = [], []
+    for ob in scene.objects:
+        if ob.type != "LIGHT" or ob.hide_render:
+            continue
+        light = ob.data
+        if light.type not in BAKED_LAMPS:
+            notes.append(f"{ob.name}: {light.type.lower()} lamps are not baked")
+            continue
+        m = ob.matrix_world
+        lamp = {"name": ob.name, "type": light.type, "color": [float(c) for c in light.color],
+                "energy": float(light.energy), "position": [float(v) for v in m.translation],
+                "direction": [float(v) for v in (-(m.to_3x3() @ Vector((0.0, 0.0, 1.0)))).normalized()]}
+        if light.type == "SPOT":
+            lamp["spot_size"] = float(light.spot_size)
+        lamps.append(lamp)
+    return lamps, notes
+
+
+def lamp_beams(lamp: dict, shape, cells: int) -> nm.Beams:
+    """A lamp's beams into ``shape`` (unit colour; ``channel_beams`` applies it)."""
+    if lamp["type"] == "SUN":
+        from ..reference.scenes import Sun
+        return nm.sun_beams(shape, Sun(tuple(-v for v in lamp["direction"]), lamp["energy"]), cells)
+    try:
+        beams = nm.point_beams(shape, lamp["position"], lamp["energy"] / (4.0 * math.pi), cells)
+    except ValueError:
+        raise BakeError(f"the lamp {lamp['name']} is inside the object's bounds: move it outside") from None
+    if lamp["type"] == "SPOT":
+        inside = beams.directions @ np.asarray(lamp["direction"]) >= math.cos(0.5 * lamp["spot_size"])
+        beams = nm.Beams(beams.entries[inside], beams.directions[inside], beams.powers[inside])
+    return beams
+
+
+def unshadowed(beams: nm.Beams, lamp: dict, scene, depsgraph, obj) -> nm.Beams:
+    """The beams whose way back to the lamp no other object blocks."""
+    keep = np.ones(len(beams), dtype=bool)
+    for i, (entry, d) in enumerate(zip(beams.entries, beams.directions)):
+        origin = Vector(entry) - 1e-5 * Vector(d)
+        if lamp["type"] == "SUN":
+            distance = 1e9
+        else:
+            distance = float(np.linalg.norm(np.asarray(lamp["position"]) - entry))
+        hit, _, _, _, other, _ = scene.ray_cast(depsgraph, origin, -Vector(d), distance=distance)
+        while hit and other is not None and other.original == obj.original:
+            origin = hit - 1e-5 * Vector(d)
+            distance -= (Vector(entry) - hit).length
+            hit, _, _, _, other, _ = scene.ray_cast(depsgraph, origin, -Vector(d), distance=max(distance, 0.0))
+        keep[i] = not hit
+    return nm.Beams(beams.entries[keep], beams.directions[keep], beams.powers[keep])
+
+
+def channel_beams(lamps: list[dict], shape, scene, depsgraph, obj, cells: int) -> list[nm.Beams]:
+    """Per RGB channel, every lamp's unshadowed beams with its colour."""
+    parts = [(unshadowed(lamp_beams(lamp, shape, cells), lamp, scene, depsgraph, obj), lamp["color"])
+             for lamp in lamps]
+    return [nm.Beams.join(nm.Beams(b.entries, b.directions, b.powers * color[c]) for b, color in parts)
+            for c in range(3)]
+
+
+def medium_material(obj):
+    """The object's first material that is a Lamina medium, or None."""
+    for slot in getattr(obj, "material_slots", ()):
+        if medium_nodes.is_medium(slot.material):
+            return slot.material
+    return None
+
+
+def weights_version() -> str:
+    """The shipped networks' content hash ("none" without them: a bake from other tables, in tests)."""
+    files = [nm.weights_path(k) for k in nm.KINDS]
+    if not all(f.exists() for f in files):
+        return "none"
+    return nb.array_digest(*(np.frombuffer(f.read_bytes(), dtype=np.uint8) for f in files))
+
+
+def current_key(obj, scene, p, settings: nb.Settings) -> str:
+    """The key a bake of ``obj`` made now would carry (``bake_key``)."""
+    points, normals = surface_points(obj)
+    lamps, _ = scene_lamps(scene)
+    return nb.bake_key(p.to_dict(), nb.array_digest(points, normals), lamps, settings, weights_version())
+
+
+def bake_state(obj, scene) -> tuple[str, str]:
+    """("none" | "baked" | "stale" | "unknown", a line for the panel) of the object's bake."""
+    mat = medium_material(obj)
+    record = obj.get(PROPERTY) if obj is not None else None
+    if record is None or not medium_nodes.has_bake(obj.data):
+        return "none", "Not baked: the medium shows single scattering only"
+    info = json.loads(record)
+    try:
+        p = medium_nodes.current_params(mat)
+        key = current_key(obj, scene, p, nb.Settings(**info["settings"]))
+    except Exception as e:  # noqa: BLE001 - a hand-edited material or missing weights: say so
+        return "unknown", f"Cannot check the bake: {e}"
+    if key != info["key"]:
+        return "stale", "Stale: a lamp, the mesh or the medium changed since the bake"
+    return "baked", f"Baked {info['points']} points from {info['beams']} beams in {info['seconds']:.1f} s"
+
+
+def bake_steps(obj, scene, depsgraph, p, settings: nb.Settings, tables=None):
+    """The bake as a generator of (fraction done, message); its return value (StopIteration.value) is the result
+    dict for ``apply``. Raises BakeError on bad input before any work."""
+    problem = mesh_problem(obj)
+    if problem:
+        raise BakeError(problem)
+    lamps, notes = scene_lamps(scene)
+    if not lamps:
+        raise BakeError("no sun, point or spot lamp lights the object: nothing to bake"
+                        + (f" ({'; '.join(notes)})" if notes else ""))
+    start = time.perf_counter()
+    shape = MeshShape(obj)
+    beams = channel_beams(lamps, shape, scene, depsgraph, obj, settings.cells)
+    yield 0.0, "Reconstructing the medium's tables from the networks"
+    tables = tables if tables is not None else nb.channel_tables(p)
+    points, normals = surface_points(obj)
+    out = np.zeros((len(points), 4, 3))
+    for begin in range(0, len(points), CHUNK):
+        end = min(begin + CHUNK, len(points))
+        out[begin:end] = nb.bake_points(p, tables, shape, beams, points[begin:end], normals[begin:end], settings)
+        yield end / max(len(points), 1), f"Gathered {end} of {len(points)} points"
+    key = nb.bake_key(p.to_dict(), nb.array_digest(points, normals), lamps, settings, weights_version())
+    return {"coefficients": out, "notes": notes,
+            "record": {"key": key, "points": len(points), "beams": int(sum(len(b) for b in beams) // 3),
+                       "seconds": round(time.perf_counter() - start, 2), "version": nb.VERSION,
+                       "settings": {"cells": settings.cells, "steps": settings.steps}}}
+
+
+def apply(obj, result: dict) -> None:
+    """Store a finished bake: the mesh's attributes and the object's record, together."""
+    medium_nodes.store(obj.data, result["coefficients"])
+    obj[PROPERTY] = json.dumps(result["record"])
+
+
+def run(obj, scene, depsgraph, p, settings: nb.Settings, progress=None, tables=None) -> dict:
+    """The whole bake at once (headless); ``progress(fraction, message)``. Applies it and returns the result."""
+    steps = bake_steps(obj, scene, depsgraph, p, settings, tables)
+    while True:
+        try:
+            fraction, message = next(steps)
+        except StopIteration as done:
+            result = done.value
+            break
+        if progress is not None:
+            progress(fraction, message)
+    apply(obj, result)
+    return result
