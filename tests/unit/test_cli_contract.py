@@ -37,6 +37,7 @@ def fixtures(tmp_path_factory):
     (folder / "broken.json").write_text('{"layers": [')
     (folder / "coat.json").write_text(json.dumps({"bounces": 1.5}))
     (folder / "grains.json").write_text(json.dumps({"filling_factor": 0.3, "grain": {"type": "velvet"}}))
+    (folder / "zero_medium.json").write_text(json.dumps({"sigma_s": [0.0, 0.0, 0.0], "sigma_a": [0.0, 0.0, 0.0]}))
     for name, data in ANISO_BAD.items():
         (folder / f"{name}.json").write_text(json.dumps(data))
     (folder / "results").mkdir()
@@ -60,6 +61,7 @@ MAKE = ("make-material", "--preset", "plastic")
 COMPARE = ("compare", "--preset", "plastic", "--forms", "nodes", "--scenes", "sphere")
 COAT = ("--model", "thin_coat", "--preset", "amber_lacquer")
 BAKE = ("bake", "--blend", "in.blend", "--material", MATERIAL)
+MEDIUM = ("bake-medium", "--blend", "in.blend", "--object", "Lamina plastic")  # in.blend's sphere
 POROUS = ("add-porous", "--blend", "in.blend", "--material", MATERIAL, "--preset", "dust_on_wood")
 
 # (arguments, text the one line must contain)
@@ -149,6 +151,19 @@ REFUSALS = [
     (BAKE + ("--out", "in.blend"), "--out 'in.blend' exists; pass --overwrite"),
     (BAKE + ("--out", "empty"), "--out 'empty' is a folder"),
     (("bake", "--material", MATERIAL, "--out", "x.blend"), "the following arguments are required: --blend"),
+    # bake-medium
+    (MEDIUM + ("--preset", "fluff", "--out", "x.blend"), "unknown neural_medium preset 'fluff'; available:"),
+    (MEDIUM + ("--json", "zero_medium.json", "--out", "x.blend"), "zero density"),
+    (MEDIUM + ("--scale", "2", "--out", "x.blend"), "--scale needs --preset or --json"),
+    (MEDIUM + ("--preset", "milk", "--cells", "0", "--out", "x.blend"), "bake settings out of range"),
+    (MEDIUM + ("--out", "x.blend"), "has no Lamina medium material: pass --preset or --json"),
+    (MEDIUM + ("--preset", "milk"), "pass --out FILE, or --overwrite"),
+    (("bake-medium", "--blend", "in.blend", "--object", "Nope", "--preset", "milk", "--out", "x.blend"),
+     "--object 'Nope': no such object"),
+    (("bake-medium", "--blend", "in.blend", "--object", "Lamina plastic camera", "--preset", "milk", "--out",
+      "x.blend"), "select a mesh object"),
+    (("bake-medium", "--blend", "corrupt.blend", "--object", "x", "--preset", "milk", "--out", "x.blend"),
+     "Blender cannot read it"),
     # add-porous
     (("add-porous", "--blend", "in.blend", "--material", "Nope", "--preset", "dust_on_wood", "--out", "x.blend"),
      "--material 'Nope': no such material in"),
