@@ -16,7 +16,8 @@ harmonics, per channel)
 which the material evaluates as max(c0 + c . w, 0) on front faces. Named approximations (measured in
 docs/accuracy.md): the infinite-medium tables (they count light that would have left the object, Sec. 3.2), the
 index-matched boundary (no refraction, no Fresnel: what Cycles' volume renders too), the linear fit in w, and
-the first segment only of a ray that leaves and re-enters a non-convex object.
+the first segment only of a ray that leaves and re-enters a non-convex object. The boundary's image sources
+(``Settings.boundary``, on by default) take away most of what the infinite-medium tables add.
 """
 from __future__ import annotations
 
@@ -36,10 +37,13 @@ COEFFICIENTS = ("c0", "cx", "cy", "cz")
 
 @dataclass(frozen=True)
 class Settings:
-    """Bake resolution: beams per lamp side (``cells`` x ``cells`` beams), quadrature points along each ray."""
+    """Bake resolution: beams per lamp side (``cells`` x ``cells`` beams), quadrature points along each ray; and
+    ``boundary``: multiple scattering with the boundary's image sources (``reference.neural_medium.gather``'s
+    ``images``), or the paper's infinite medium."""
 
     cells: int = 16
     steps: int = 12
+    boundary: bool = True
 
     def __post_init__(self):
         if not (1 <= self.cells <= 256 and 1 <= self.steps <= 256):
@@ -110,8 +114,9 @@ def bake_points(p, tables: list[dict], shape, beams: list, points, normals, sett
             if progress is not None:
                 progress((c + done / max(total, 1)) / 3.0)
 
+        images = nm.extrapolation_distance(p.albedo[c], p.g) if settings.boundary else None
         radiance = nm.gather(tables[c], p.mean_free_path[c], shape, beams[c], origins, inward, steps=settings.steps,
-                             progress=report)
+                             progress=report, images=images)
         values = sum(radiance[kind] for kind in nm.KINDS).reshape(len(points), DIRECTIONS)
         out[:, :, c] = fit_linear(directions, values)
     return out
@@ -122,7 +127,8 @@ def bake_key(params: dict, mesh_digest: str, lamps: list, settings: Settings, we
     networks' version, numbers to 5 significant digits (a value read back from a float32 socket is the same value).
     A changed key means the stored bake is stale."""
     key = json.dumps({"version": VERSION, "params": _rounded(params), "mesh": mesh_digest, "lamps": _rounded(lamps),
-                      "settings": [settings.cells, settings.steps], "weights": weights}, sort_keys=True)
+                      "settings": [settings.cells, settings.steps, settings.boundary], "weights": weights},
+                     sort_keys=True)
     return hashlib.sha256(key.encode()).hexdigest()[:16]
 
 

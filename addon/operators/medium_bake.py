@@ -71,6 +71,14 @@ class MeshShape:
         self.bounding_sphere = (centre, max(float(np.linalg.norm(co - centre, axis=1).max()), 1e-9))
         self.epsilon = 1e-6 * (1.0 + float(np.abs(co).max()))
 
+    def normal(self, points):
+        """Unit outward normals of the faces nearest to the points."""
+        out = np.zeros((len(points), 3))
+        for i, x in enumerate(np.atleast_2d(points)):
+            _, normal, _, _ = self.bvh.find_nearest(Vector(x))
+            out[i] = tuple(normal)
+        return out
+
     def interval(self, origins, directions):
         """(t0, t1) of each ray's first entry into the mesh and the exit after it (inf, -inf on a miss)."""
         origins, directions = np.atleast_2d(origins), np.atleast_2d(directions)
@@ -227,7 +235,8 @@ def bake_steps(obj, scene, depsgraph, p, settings: nb.Settings, tables=None):
     return {"coefficients": out, "notes": notes,
             "record": {"key": key, "points": len(points), "beams": int(sum(len(b) for b in beams) // 3),
                        "seconds": round(time.perf_counter() - start, 2), "version": nb.VERSION,
-                       "settings": {"cells": settings.cells, "steps": settings.steps}}}
+                       "settings": {"cells": settings.cells, "steps": settings.steps,
+                                    "boundary": settings.boundary}}}
 
 
 def apply(obj, result: dict) -> None:

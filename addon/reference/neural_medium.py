@@ -180,8 +180,7 @@ class Beams:
 
 
 def _orthonormal(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    a = np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0])
-    a /= np.linalg.norm(a)
+    a = _perpendicular(d)
     return a, np.cross(d, a)
 
 
@@ -228,44 +227,94 @@ def point_beams(shape, position, intensity: float, cells: int) -> Beams:
     return _entering(shape, np.tile(position, (len(U), 1)), directions, np.full(len(U), intensity * solid_angle))
 
 
+def extrapolation_distance(albedo: float, g: float) -> float:
+    """The diffusion's extrapolated boundary z_b = 2 D in mean free paths, D = 1 / (3 sigma_t') with the reduced
+    extinction sigma_t' = 1 - albedo g per mfp, for an index-matched boundary (A = 1; Jensen et al. 2001, Eq. 6)."""
+    return 2.0 / (3.0 * max(1.0 - float(albedo) * float(g), 1e-6))
+
+
+def _perpendicular(d: np.ndarray) -> np.ndarray:
+    """A unit vector perpendicular to each unit row of d (..., 3)."""
+    helper = np.where(np.abs(d[..., 2:3]) < 0.9, [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    a = np.cross(d, helper)
+    return a / np.linalg.norm(a, axis=-1, keepdims=True)
+
+
+def _mirror(points, directions, plane_points, normals, offset: float):
+    """Points and directions mirrored across the planes through ``plane_points`` + ``offset`` x ``normals`` (unit,
+    outward): the image sources of the extrapolated boundary."""
+    depth = np.sum((points - plane_points) * normals, axis=-1, keepdims=True) - offset
+    return (points - 2.0 * depth * normals,
+            directions - 2.0 * np.sum(directions * normals, axis=-1, keepdims=True) * normals)
+
+
+def _lookup(table: Table, x, sources, directions, w, ell: float):
+    """Phi at the points x (R, S, 3) of the sources (R or 1, M, 3) along their unit directions (same shape) seen
+    along the propagation directions w (R, 3): (R, S, M), lengths in scene units (mfp ``ell``)."""
+    v = x[:, :, None, :] - sources[:, None, :, :]
+    d = directions[:, None, :, :]
+    z = np.sum(v * d, axis=-1)
+    radial = v - z[..., None] * d
+    rho = np.linalg.norm(radial, axis=-1)
+    e_rho = np.where((rho > 1e-12)[..., None], radial / np.maximum(rho, 1e-12)[..., None], _perpendicular(d))
+    wb = w[:, None, None, :]
+    theta = np.broadcast_to(np.arccos(np.clip(np.sum(wb * d, axis=-1), -1.0, 1.0)), rho.shape)
+    phi = np.abs(np.arctan2(np.sum(np.cross(d, e_rho) * wb, axis=-1), np.sum(e_rho * wb, axis=-1)))
+    return table.lookup(rho / ell, z / ell, theta, phi)
+
+
+def _camera_image_weight(camera_images, entry_images, zb: float, camera_normals, entry_normals):
+    """(R, M) weight of the image across the camera ray's entry plane: how far it lies from the beam's own image, in
+    units of 2 z_b, at most 1 (0 where the planes coincide: the dipole's single image)."""
+    return np.clip(np.linalg.norm(camera_images - entry_images, axis=-1) / (2.0 * zb), 0.0, 1.0)
+
+
 def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, directions, kinds=KINDS,
-           steps: int = 24, chunk: int = 16, progress=None) -> dict:
+           steps: int = 24, chunk: int = 16, progress=None, images: float | None = None) -> dict:
     """Radiance reaching ``origins`` along the rays ``-directions`` (camera rays: origins outside the shape,
     ``directions`` into it) from the double and multiple scattering of the ``beams``' light, one channel: the first
     segment of the camera ray inside the shape integrated with ``steps`` points of the exponential's quantiles,
     L = Integral exp(-s / l) Phi(x(s), -d) ds, and Phi(x, w) = Sum over beams of power x table(rho, z, theta, phi) /
     l^3 (``tables``: kind -> Table of this channel's albedo and g; lengths in the table are mean free paths
-    ``l`` = ``mean_free_path`` scene units). The infinite-medium tables also count light that in the object would
-    have left it: the method's approximation (Sec. 3.2), measured against the ground truth in docs/training.md.
-    ``progress(done, total)`` is called after each chunk of rays."""
+    ``l`` = ``mean_free_path`` scene units).
+
+    The infinite-medium tables also count light that in the object would have left it (the method's approximation,
+    Sec. 3.2). ``images`` (the extrapolation distance z_b in mfp, ``extrapolation_distance``; needs
+    ``shape.normal``) subtracts, from multiple scattering, each beam's image across the extrapolated tangent plane
+    where it enters, and its image across the plane where the camera ray enters, weighted by how far the two
+    images lie apart in units of 2 z_b (0 where the planes coincide: one image, the dipole's; 1 where they are
+    distinct, e.g. light entering the far side of a thin part), the difference clamped at 0. Measured against the
+    ground truth in docs/training.md. ``progress(done, total)`` is called after each chunk of rays."""
     ell = float(mean_free_path)
     origins, directions = np.asarray(origins, dtype=np.float64), np.asarray(directions, dtype=np.float64)
     out = {kind: np.zeros(len(origins)) for kind in kinds}
     t0, t1 = shape.interval(origins, directions)
     rows = np.flatnonzero(np.isfinite(t0) & (t1 > t0))
     q = (np.arange(steps) + 0.5) / steps
-    entries, beam_d, powers = beams.entries, beams.directions, beams.powers
-    fallback = np.stack([_orthonormal(d)[0] for d in beam_d]) if len(beams) else np.zeros((0, 3))
+    sources, beam_d, powers = beams.entries[None], beams.directions[None], beams.powers
+    if images is not None:
+        zb = float(images) * ell
+        beam_n = shape.normal(beams.entries)[None]
+        entry_images = _mirror(sources, beam_d, sources, beam_n, zb)
     for start in range(0, len(rows), chunk):
         r = rows[start:start + chunk]
         tau = (t1[r] - t0[r]) / ell
         reach = -np.expm1(-tau)  # the probability of a collision along the segment
         s = -np.log1p(-q[None, :] * reach[:, None]) * ell  # (R, S) quantiles of exp(-s / l) on the segment
         weight = reach * ell / steps  # Integral exp(-s / l) f ds = sum weight f(s)
-        x = origins[r, None, :] + (np.maximum(t0[r], 0.0)[:, None] + s)[..., None] * directions[r, None, :]
-        v = x[:, :, None, :] - entries[None, None, :, :]  # (R, S, M, 3)
-        z = np.einsum("rsmk,mk->rsm", v, beam_d)
-        radial = v - z[..., None] * beam_d
-        rho = np.linalg.norm(radial, axis=-1)
-        e_rho = np.where((rho > 1e-12)[..., None], radial / np.maximum(rho, 1e-12)[..., None], fallback)
+        enter = origins[r] + np.maximum(t0[r], 0.0)[:, None] * directions[r]
+        x = enter[:, None, :] + s[..., None] * directions[r, None, :]
         w = -directions[r]  # the light's propagation direction towards the camera
-        theta = np.arccos(np.clip(np.einsum("rk,mk->rm", w, beam_d), -1.0, 1.0))[:, None, :]
-        theta = np.broadcast_to(theta, rho.shape)
-        phi = np.abs(np.arctan2(np.einsum("rsmk,rk->rsm", np.cross(beam_d, e_rho), w),
-                                np.einsum("rsmk,rk->rsm", e_rho, w)))
+        if images is not None:
+            cam_n = shape.normal(enter)[:, None, :]
+            camera_images = _mirror(sources, beam_d, enter[:, None, :], cam_n, zb)
+            camera_weight = _camera_image_weight(camera_images[0], entry_images[0], zb, cam_n, beam_n)[:, None, :]
         for kind in kinds:
-            value = tables[kind].lookup(rho / ell, z / ell, theta, phi) @ powers / ell ** 3
-            out[kind][r] += weight * value.sum(axis=1)
+            value = _lookup(tables[kind], x, sources, beam_d, w, ell)
+            if images is not None and kind == "multiple":
+                value = np.maximum(value - _lookup(tables[kind], x, *entry_images, w, ell)
+                                   - camera_weight * _lookup(tables[kind], x, *camera_images, w, ell), 0.0)
+            out[kind][r] += weight * (value @ powers).sum(axis=1) / ell ** 3
         if progress is not None:
             progress(min(start + chunk, len(rows)), len(rows))
     return out

@@ -118,6 +118,11 @@ class Sphere:
         """Distance from the points x (inside) along the unit d to the boundary (>= 0)."""
         return np.maximum(self.interval(x, d)[1], 0.0)
 
+    def normal(self, x):
+        """Unit outward normals of the boundary at (or nearest to) the points x."""
+        v = _rows(x) - np.asarray(self.centre)
+        return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
+
 
 @dataclass(frozen=True)
 class Slab:
@@ -143,6 +148,12 @@ class Slab:
 
     def exit_distance(self, x, d):
         return np.maximum(self.interval(x, d)[1], 0.0)
+
+    def normal(self, x):
+        """+z nearer the top face, -z nearer the bottom one."""
+        z = _rows(x)[:, 2]
+        up = np.abs(z - self.z1) <= np.abs(z - self.z0)
+        return np.stack([np.zeros_like(z), np.zeros_like(z), np.where(up, 1.0, -1.0)], axis=1)
 
 
 @dataclass(frozen=True)
@@ -174,6 +185,16 @@ class Box:
 
     def exit_distance(self, x, d):
         return np.maximum(self.interval(x, d)[1], 0.0)
+
+    def normal(self, x):
+        """The outward axis of the face nearest to each point."""
+        x = _rows(x)
+        lo, hi = np.asarray(self.lo), np.asarray(self.hi)
+        gaps = np.concatenate([x - lo, hi - x], axis=1)  # (N, 6): distances to the -x, -y, -z, +x, +y, +z faces
+        face = np.argmin(np.abs(gaps), axis=1)
+        n = np.zeros_like(x)
+        n[np.arange(len(x)), face % 3] = np.where(face < 3, -1.0, 1.0)
+        return n
 
 
 def _axis_interval(o, d, lo, hi):

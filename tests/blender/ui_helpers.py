@@ -71,7 +71,7 @@ def panel_log(context_material) -> list:
 
     log = []
     context = SimpleNamespace(material=context_material, scene=bpy.context.scene,
-                              window_manager=bpy.context.window_manager)
+                              window_manager=bpy.context.window_manager, active_object=bpy.context.active_object)
     for cls in panels.classes:
         if cls is panels.LAMINA_PT_compare and not cls.poll(context):
             continue
