@@ -87,7 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     bn = sub.add_parser("bench", help="benchmarks and accuracy tables (docs/benchmarks.md, docs/accuracy.md)")
     bn.add_argument("--out", default="docs")
-    bn.add_argument("--model", action="append", choices=list(MODELS),
+    bn.add_argument("--model", action="append", choices=list(REGISTRY),
                     help="measure only this model again (repeatable) and replace its sections in the existing pages")
     bn.add_argument("--samples", type=int, default=64)
     bn.add_argument("--resolution", type=int, default=64)

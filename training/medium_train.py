@@ -13,7 +13,8 @@ The export (``addon.bake.mlp.save``) carries a manifest: activation, encoding, t
 seed, minutes, losses, and per material the energy ratio (power of the reconstructed table over the tabulated
 one, minus 1: the paper's measure of its ~5 % error), for the training materials and the held-out ones apart.
 
-    python -m training.medium_train --data ~/.cache/lamina/neural-medium --minutes 20 --out addon/bake/weights
+    python -m training.medium_train --data ~/.cache/lamina/neural-medium --minutes 20 --out addon/bake/weights \
+        --off-grid ~/.cache/lamina/neural-medium-off-grid
     python -m training.medium_train --data /tmp/m --quick --out /tmp/w              # seconds, for tests
 """
 from __future__ import annotations
@@ -130,7 +131,7 @@ def summary(ratios: dict) -> dict:
 
 
 def train_kind(kind: str, files: list[Path], held_out: set[str], minutes: float, seed: int, out: Path,
-               log=print) -> dict:
+               log=print, off_grid: list[Path] = ()) -> dict:
     """Train, evaluate and export the ``kind`` network; returns its manifest."""
     materials = [load_material(p, kind) for p in files]
     training = [m for m in materials if m["name"] not in held_out]
@@ -145,15 +146,18 @@ def train_kind(kind: str, files: list[Path], held_out: set[str], minutes: float,
                 "seed": seed, "minutes": minutes, **info,
                 "date": datetime.date.today().isoformat(), "code_version": code_version()}
     model = to_mlp(net, manifest)
+    manifest["grid"] = {k: np.asarray(training[0][k]).tolist() for k in ("rho_edges", "z_edges", "theta", "phi")}
     manifest["energy_ratio"] = {"training": summary(energy_ratios(model, training)),
                                 "held_out": summary(energy_ratios(model, [m for m in materials
-                                                                         if m["name"] in held_out]))}
+                                                                         if m["name"] in held_out])),
+                                "off_grid": summary(energy_ratios(model, [load_material(p, kind) for p in off_grid]))}
     linears = [m for m in net if isinstance(m, torch.nn.Linear)]
     mlp.save(nm.weights_path(kind, out), [m.weight.detach().numpy().T for m in linears],
              [m.bias.detach().numpy() for m in linears], manifest)
     e = manifest["energy_ratio"]
     log(f"{kind}: energy ratio |mean| {e['training']['mean_abs']:.2%}, worst {e['training']['worst_abs']:.2%} "
-        f"(held out: {e['held_out']['mean_abs']:.2%} / {e['held_out']['worst_abs']:.2%}); wrote "
+        f"(held out: {e['held_out']['mean_abs']:.2%} / {e['held_out']['worst_abs']:.2%}; off the grid: "
+        f"{e['off_grid']['mean_abs']:.2%} / {e['off_grid']['worst_abs']:.2%}); wrote "
         f"{nm.weights_path(kind, out)}")
     return manifest
 
@@ -165,6 +169,8 @@ def main(argv=None) -> int:
     ap.add_argument("--kinds", nargs="+", choices=nm.KINDS, default=list(nm.KINDS))
     ap.add_argument("--minutes", type=float, default=20.0, help="training time per network")
     ap.add_argument("--hold-out", nargs="*", default=[], help="material names (a<albedo>_g<g>) kept out of training")
+    ap.add_argument("--off-grid", type=Path, help="a dataset folder of materials between the grid's (albedo, g), "
+                                                  "only evaluated (the manifest's off_grid energy ratios)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quick", action="store_true", help="a few seconds per network, for tests")
     a = ap.parse_args(argv)
@@ -175,8 +181,11 @@ def main(argv=None) -> int:
     if unknown:
         raise SystemExit(f"--hold-out: no such material(s) {', '.join(sorted(unknown))} in {a.data}")
     a.out.mkdir(parents=True, exist_ok=True)
+    off_grid = sorted(a.off_grid.glob("a*_g*.npz")) if a.off_grid else []
+    if a.off_grid and not off_grid:
+        raise SystemExit(f"--off-grid: no dataset files in {a.off_grid}")
     for kind in a.kinds:
-        train_kind(kind, files, set(a.hold_out), 0.05 if a.quick else a.minutes, a.seed, a.out)
+        train_kind(kind, files, set(a.hold_out), 0.05 if a.quick else a.minutes, a.seed, a.out, off_grid=off_grid)
     return 0
 
 

@@ -17,7 +17,7 @@ import importlib
 import os
 from dataclasses import dataclass
 
-from ..models import MODELS
+from ..models import MODELS, REGISTRY
 from .spongecake import MS_DEFAULT, MsSizes
 
 
@@ -43,7 +43,7 @@ class Sizes:
 def model_benches() -> list:
     """The benchmark module of each registered model that has one, in registry order."""
     out = []
-    for model_id in MODELS:
+    for model_id in REGISTRY:
         try:
             out.append(importlib.import_module(f".{model_id}", __package__))
         except ModuleNotFoundError:
