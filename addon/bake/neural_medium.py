@@ -110,6 +110,11 @@ def bake_points(p, tables: list[dict], shape, beams: list, points, normals, sett
     inward = -directions.reshape(-1, 3)
     out = np.zeros((len(points), 4, 3))
     for c in range(3):
+        same = next((k for k in range(c) if _same_channel(p, beams, k, c)), None)
+        if same is not None:  # a grey medium under white lamps: computed once
+            out[:, :, c] = out[:, :, same]
+            continue
+
         def report(done, total, c=c):
             if progress is not None:
                 progress((c + done / max(total, 1)) / 3.0)
@@ -120,6 +125,11 @@ def bake_points(p, tables: list[dict], shape, beams: list, points, normals, sett
         values = sum(radiance[kind] for kind in nm.KINDS).reshape(len(points), DIRECTIONS)
         out[:, :, c] = fit_linear(directions, values)
     return out
+
+
+def _same_channel(p, beams: list, a: int, b: int) -> bool:
+    return (p.albedo[a] == p.albedo[b] and p.mean_free_path[a] == p.mean_free_path[b]
+            and np.array_equal(beams[a].powers, beams[b].powers))
 
 
 def bake_key(params: dict, mesh_digest: str, lamps: list, settings: Settings, weights: str) -> str:

@@ -15,6 +15,7 @@ without Lamina. The material's ``lamina_medium`` property stores the dict it was
 from __future__ import annotations
 
 import json
+import math
 
 import bpy
 
@@ -54,6 +55,50 @@ def current_params(mat):
     sigma_a = [(1.0 - c) * absorb["Density"].default_value * scale for c in absorb["Color"].default_value[:3]]
     return model.params_from_dict({"sigma_s": sigma_s, "sigma_a": sigma_a,
                                    "g": scatter["Anisotropy"].default_value, "scale": scale})
+
+
+def volume_of(mat) -> dict | None:
+    """The medium dict (scale 1) of a material whose Volume output is a homogeneous Principled Volume (no emission,
+    no linked input) or a Volume Scatter plus a Volume Absorption (through an Add Shader, unlinked inputs); None for
+    anything else. Principled Volume, as Cycles computes it (node_principled_volume): sigma_s = Color x Density,
+    sigma_a = max(1 - Color, 0) x max(1 - sqrt(Absorption Color), 0) x Density."""
+    tree = getattr(mat, "node_tree", None)
+    out = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.is_active_output), None) \
+        if tree is not None else None
+    if out is None or not out.inputs["Volume"].is_linked:
+        return None
+    node = out.inputs["Volume"].links[0].from_node
+    if node.bl_idname == "ShaderNodeVolumePrincipled":
+        return _principled_volume(node)
+    if node.bl_idname == "ShaderNodeAddShader" and all(i.is_linked for i in node.inputs[:2]):
+        parts = {i.links[0].from_node.bl_idname: i.links[0].from_node for i in node.inputs[:2]}
+        scatter, absorb = parts.get("ShaderNodeVolumeScatter"), parts.get("ShaderNodeVolumeAbsorption")
+        if scatter is None or absorb is None or _any_linked(scatter) or _any_linked(absorb):
+            return None
+        if getattr(scatter, "phase", "HENYEY_GREENSTEIN") != "HENYEY_GREENSTEIN":  # 5.0 has other phase functions
+            return None
+        density_s, density_a = scatter.inputs["Density"].default_value, absorb.inputs["Density"].default_value
+        return {"sigma_s": [c * density_s for c in scatter.inputs["Color"].default_value[:3]],
+                "sigma_a": [max(1.0 - c, 0.0) * density_a for c in absorb.inputs["Color"].default_value[:3]],
+                "g": scatter.inputs["Anisotropy"].default_value, "scale": 1.0}
+    return None
+
+
+def _any_linked(node) -> bool:
+    return any(i.is_linked for i in node.inputs)
+
+
+def _principled_volume(node) -> dict | None:
+    inputs = node.inputs
+    if _any_linked(node) or inputs["Emission Strength"].default_value > 0.0 \
+            or inputs["Blackbody Intensity"].default_value > 0.0:
+        return None
+    density = max(inputs["Density"].default_value, 0.0)
+    color = [max(c, 0.0) for c in inputs["Color"].default_value[:3]]
+    absorption = [max(1.0 - math.sqrt(max(c, 0.0)), 0.0) for c in inputs["Absorption Color"].default_value[:3]]
+    return {"sigma_s": [c * density for c in color],
+            "sigma_a": [max(1.0 - c, 0.0) * a * density for c, a in zip(color, absorption)],
+            "g": inputs["Anisotropy"].default_value, "scale": 1.0}
 
 
 def new_material(p, name: str | None = None) -> bpy.types.Material:

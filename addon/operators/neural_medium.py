@@ -38,6 +38,10 @@ class LAMINA_OT_add_neural_medium(bpy.types.Operator):
                                      description="Extinction per unit length (all channels)")
     g: declared(model.MEDIUM, "g")
     scale: declared(model.MEDIUM, "scale")
+    from_volume: bpy.props.BoolProperty(
+        name="From the material's volume", default=True,
+        description="Take the medium from the active material's homogeneous Principled Volume (or Volume Scatter + "
+                    "Absorption); that material stays in the file")
 
     @classmethod
     def poll(cls, context):
@@ -52,6 +56,19 @@ class LAMINA_OT_add_neural_medium(bpy.types.Operator):
 
     def draw(self, context):
         layout = self.layout
+        if self.source_volume(context) is not None:
+            layout.prop(self, "from_volume")
+        if self.use_volume(context):
+            layout.label(text=f"Converting the volume of {context.active_object.active_material.name}", icon="INFO")
+        else:
+            self.draw_medium(layout)
+        layout.prop(self, "scale")
+        p = self.params_or_none(context)
+        if p is not None:
+            mfp = ", ".join(f"{m:.3g}" for m in p.mean_free_path)
+            layout.label(text=f"Albedo {', '.join(f'{a:.3f}' for a in p.albedo)}; mean free path {mfp}")
+
+    def draw_medium(self, layout):
         layout.prop(self, "preset")
         if self.preset != CUSTOM:
             layout.label(text=presets.description(model.ID, self.preset)[:70], icon="INFO")
@@ -65,13 +82,21 @@ class LAMINA_OT_add_neural_medium(bpy.types.Operator):
                 col.prop(self, "color")
                 col.prop(self, "density")
             layout.prop(self, "g")
-        layout.prop(self, "scale")
-        p = self.params_or_none()
-        if p is not None:
-            mfp = ", ".join(f"{m:.3g}" for m in p.mean_free_path)
-            layout.label(text=f"Albedo {', '.join(f'{a:.3f}' for a in p.albedo)}; mean free path {mfp}")
 
-    def medium_dict(self) -> dict:
+    def source_volume(self, context) -> dict | None:
+        mat = getattr(context.active_object, "active_material", None)
+        if mat is None or medium_nodes.is_medium(mat):
+            return None
+        return medium_nodes.volume_of(mat)
+
+    def use_volume(self, context) -> bool:
+        return self.from_volume and self.source_volume(context) is not None
+
+    def medium_dict(self, context=None) -> dict:
+        if context is not None and self.use_volume(context):
+            volume = self.source_volume(context)
+            return {**volume, "sigma_s": [s * self.scale for s in volume["sigma_s"]],
+                    "sigma_a": [a * self.scale for a in volume["sigma_a"]], "scale": self.scale}
         if self.preset != CUSTOM:
             return {**presets.load(model.ID, self.preset), "scale": self.scale}
         if self.input_mode == "coefficients":
@@ -79,21 +104,24 @@ class LAMINA_OT_add_neural_medium(bpy.types.Operator):
         return {"sigma_s": [c * self.density for c in self.color],
                 "sigma_a": [(1.0 - c) * self.density for c in self.color], "g": self.g, "scale": self.scale}
 
-    def params_or_none(self):
+    def params_or_none(self, context=None):
         try:
-            return model.params_from_dict(self.medium_dict())
+            return model.params_from_dict(self.medium_dict(context))
         except ParamError:
             return None
 
     def execute(self, context):
         try:
-            validated = model.validate(self.medium_dict())
+            validated = model.validate(self.medium_dict(context))
         except ParamError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
         for w in validated.warnings:
             self.report({"WARNING"}, w)
-        name = model.LABEL if self.preset == CUSTOM else f"{model.LABEL} {self.preset.replace('_', ' ')}"
+        if self.use_volume(context):
+            name = f"{context.active_object.active_material.name} ({model.LABEL})"
+        else:
+            name = model.LABEL if self.preset == CUSTOM else f"{model.LABEL} {self.preset.replace('_', ' ')}"
         mat = built_or_reported(self, lambda: medium_nodes.new_material(validated.params, name),
                                 f"Could not build the {model.LABEL} material")
         if mat is None:

@@ -308,12 +308,14 @@ def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, di
         if images is not None:
             cam_n = shape.normal(enter)[:, None, :]
             camera_images = _mirror(sources, beam_d, enter[:, None, :], cam_n, zb)
+            both_images = _mirror(*entry_images, enter[:, None, :], cam_n, zb)
             camera_weight = _camera_image_weight(camera_images[0], entry_images[0], zb, cam_n, beam_n)[:, None, :]
         for kind in kinds:
             value = _lookup(tables[kind], x, sources, beam_d, w, ell)
             if images is not None and kind == "multiple":
                 value = np.maximum(value - _lookup(tables[kind], x, *entry_images, w, ell)
-                                   - camera_weight * _lookup(tables[kind], x, *camera_images, w, ell), 0.0)
+                                   - camera_weight * (_lookup(tables[kind], x, *camera_images, w, ell)
+                                                      - _lookup(tables[kind], x, *both_images, w, ell)), 0.0)
             out[kind][r] += weight * (value @ powers).sum(axis=1) / ell ** 3
         if progress is not None:
             progress(min(start + chunk, len(rows)), len(rows))

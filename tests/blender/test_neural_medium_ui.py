@@ -43,7 +43,7 @@ def test_custom_coefficients_and_colour_with_density(registered):
 
 def test_the_dialog_shows_albedo_and_mean_free_path(registered):
     ns = dialog("add_neural_medium", preset="cloud", scale=0.5)
-    shown = text(draw_dialog(OP, ns, ("medium_dict", "params_or_none")))
+    shown = text(draw_dialog(OP, ns, ("medium_dict", "params_or_none", "source_volume", "use_volume", "draw_medium")))
     assert "Albedo" in shown and "mean free path" in shown and "scale" in shown
 
 
@@ -75,3 +75,47 @@ def test_the_panel_shows_the_medium_and_its_bake(registered):
     bpy.context.scene.cycles.volume_bounces = 2
     assert "Volume bounces = 2" in panel_text(mat)  # a warning; the setting stays the user's
     assert bpy.context.scene.cycles.volume_bounces == 2
+
+
+def _volume_material(kind: str):
+    mat = bpy.data.materials.new(f"my {kind}")
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    tree = mat.node_tree
+    out = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+    if kind == "principled":
+        v = tree.nodes.new("ShaderNodeVolumePrincipled")
+        v.inputs["Color"].default_value = (0.9, 0.5, 0.2, 1.0)
+        v.inputs["Density"].default_value = 4.0
+        v.inputs["Anisotropy"].default_value = 0.3
+        v.inputs["Absorption Color"].default_value = (0.25, 0.0, 1.0, 1.0)
+        tree.links.new(v.outputs[0], out.inputs["Volume"])
+    else:
+        scatter, absorb = tree.nodes.new("ShaderNodeVolumeScatter"), tree.nodes.new("ShaderNodeVolumeAbsorption")
+        scatter.inputs["Color"].default_value = (0.8, 0.6, 0.4, 1.0)
+        scatter.inputs["Density"].default_value = 2.0
+        absorb.inputs["Color"].default_value = (0.5, 0.5, 1.0, 1.0)
+        absorb.inputs["Density"].default_value = 0.2
+        add = tree.nodes.new("ShaderNodeAddShader")
+        tree.links.new(scatter.outputs[0], add.inputs[0])
+        tree.links.new(absorb.outputs[0], add.inputs[1])
+        tree.links.new(add.outputs[0], out.inputs["Volume"])
+    return mat
+
+
+def test_a_homogeneous_volume_converts_to_the_same_medium(registered):
+    """Principled Volume as Cycles computes it: sigma_s = Color x Density, sigma_a = (1 - Color)(1 - sqrt(Absorption
+    Color)) x Density; Scatter + Absorption: Color x Density and (1 - Color) x Density."""
+    ball = _closed_ball()
+    ball.data.materials.append(_volume_material("principled"))
+    assert bpy.ops.lamina.add_neural_medium(scale=1.0) == {"FINISHED"}
+    p = medium_nodes.current_params(ball.material_slots[0].material)
+    np.testing.assert_allclose(p.sigma_s, [3.6, 2.0, 0.8], rtol=1e-5)
+    np.testing.assert_allclose(p.sigma_a, [0.1 * 0.5 * 4.0, 0.5 * 1.0 * 4.0, 0.0], atol=1e-5)
+    assert p.g == pytest.approx(0.3) and "my principled" in bpy.data.materials  # the original stays
+    ball.material_slots[0].material = _volume_material("pair")
+    pair = medium_nodes.volume_of(ball.material_slots[0].material)
+    np.testing.assert_allclose(pair["sigma_s"], [1.6, 1.2, 0.8], rtol=1e-6)
+    np.testing.assert_allclose(pair["sigma_a"], [0.1, 0.1, 0.0], atol=1e-6)
+    plain = bpy.data.materials.new("plain")
+    assert medium_nodes.volume_of(plain) is None
