@@ -263,10 +263,12 @@ def _lookup(table: Table, x, sources, directions, w, ell: float):
     return table.lookup(rho / ell, z / ell, theta, phi)
 
 
-def _camera_image_weight(camera_images, entry_images, zb: float, camera_normals, entry_normals):
-    """(R, M) weight of the image across the camera ray's entry plane: how far it lies from the beam's own image, in
-    units of 2 z_b, at most 1 (0 where the planes coincide: the dipole's single image)."""
-    return np.clip(np.linalg.norm(camera_images - entry_images, axis=-1) / (2.0 * zb), 0.0, 1.0)
+def _camera_image_weight(camera_images, entry_images, zb: float):
+    """(R, M) weight of the image across the camera ray's entry plane, from how far it lies from the beam's own
+    image: 0 within z_b (the planes nearly coincide: the dipole's single image), rising linearly to 1 at 3 z_b.
+    Chosen among 0 / 0.5 / 1 / 2 z_b offsets on the five spheres of training/medium_gather_check.py (docs/training.md):
+    a calibration on those cases, not a derivation."""
+    return np.clip((np.linalg.norm(camera_images - entry_images, axis=-1) - zb) / (2.0 * zb), 0.0, 1.0)
 
 
 def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, directions, kinds=KINDS,
@@ -282,8 +284,8 @@ def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, di
     Sec. 3.2). ``images`` (the extrapolation distance z_b in mfp, ``extrapolation_distance``; needs
     ``shape.normal``) subtracts, from multiple scattering, each beam's image across the extrapolated tangent plane
     where it enters, and its image across the plane where the camera ray enters, weighted by how far the two
-    images lie apart in units of 2 z_b (0 where the planes coincide: one image, the dipole's; 1 where they are
-    distinct, e.g. light entering the far side of a thin part), the difference clamped at 0. Measured against the
+    images lie apart (``_camera_image_weight``: 0 where the planes coincide, one image, the dipole's; 1 where they
+    are distinct, e.g. light entering the far side of a thin part), the difference clamped at 0. Measured against the
     ground truth in docs/training.md. ``progress(done, total)`` is called after each chunk of rays."""
     ell = float(mean_free_path)
     origins, directions = np.asarray(origins, dtype=np.float64), np.asarray(directions, dtype=np.float64)
@@ -308,14 +310,12 @@ def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, di
         if images is not None:
             cam_n = shape.normal(enter)[:, None, :]
             camera_images = _mirror(sources, beam_d, enter[:, None, :], cam_n, zb)
-            both_images = _mirror(*entry_images, enter[:, None, :], cam_n, zb)
-            camera_weight = _camera_image_weight(camera_images[0], entry_images[0], zb, cam_n, beam_n)[:, None, :]
+            camera_weight = _camera_image_weight(camera_images[0], entry_images[0], zb)[:, None, :]
         for kind in kinds:
             value = _lookup(tables[kind], x, sources, beam_d, w, ell)
             if images is not None and kind == "multiple":
                 value = np.maximum(value - _lookup(tables[kind], x, *entry_images, w, ell)
-                                   - camera_weight * (_lookup(tables[kind], x, *camera_images, w, ell)
-                                                      - _lookup(tables[kind], x, *both_images, w, ell)), 0.0)
+                                   - camera_weight * _lookup(tables[kind], x, *camera_images, w, ell), 0.0)
             out[kind][r] += weight * (value @ powers).sum(axis=1) / ell ** 3
         if progress is not None:
             progress(min(start + chunk, len(rows)), len(rows))
