@@ -19,8 +19,8 @@ import json
 import math
 import time
 
+import bpy  # noqa: F401, I001 - the bpy module must be imported before bmesh
 import bmesh
-import bpy
 import numpy as np
 from mathutils import Vector
 from mathutils.bvhtree import BVHTree

@@ -152,3 +152,29 @@ def test_the_material_reads_back_the_medium_it_was_made_from():
     np.testing.assert_allclose(back.sigma_s, p.sigma_s, rtol=1e-6)
     np.testing.assert_allclose(back.sigma_a, p.sigma_a, rtol=1e-5)
     assert back.g == pytest.approx(p.g) and back.scale == p.scale
+
+
+def test_the_bake_operator_and_the_cli_use_the_shipped_networks(registered, tmp_path):
+    """The whole path with the shipped networks: Add, Bake Scattering (execute, as a script runs it), then
+    ``bake-medium`` on a saved file: finite, non-negative light on the lit side, the file written once."""
+    from addon import cli
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8)
+    ball = bpy.context.active_object
+    sun = bpy.data.objects.new("sun", bpy.data.lights.new("sun", type="SUN"))
+    bpy.context.scene.collection.objects.link(sun)
+    bpy.context.view_layer.update()
+    assert bpy.ops.lamina.add_neural_medium(preset="cloud", scale=0.5) == {"FINISHED"}
+    assert bpy.ops.lamina.bake_medium(cells=6, steps=4) == {"FINISHED"}
+    c = np.array([tuple(v.vector) for v in ball.data.attributes[medium_nodes.ATTRIBUTES[0]].data])
+    assert np.isfinite(c).all() and c.max() > 0.0
+    assert medium_bake.bake_state(ball, bpy.context.scene)[0] == "baked"
+    source, out = tmp_path / "in.blend", tmp_path / "out.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(source))
+    assert cli.main(["bake-medium", "--blend", str(source), "--object", ball.name, "--preset", "milk", "--scale",
+                     "0.05", "--cells", "4", "--steps", "4", "--out", str(out)]) == 0
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    baked = bpy.data.objects[ball.name]
+    assert medium_nodes.is_medium(baked.material_slots[0].material) and medium_nodes.has_bake(baked.data)
+    assert cli.main(["bake-medium", "--blend", str(source), "--object", ball.name, "--out", str(out)]) == 2  # exists
