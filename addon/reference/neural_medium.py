@@ -111,22 +111,37 @@ class Table:
     def lookup(self, rho, z, theta, phi) -> np.ndarray:
         """Phi at points (rho, z in mfp) and folded directions: multilinear between the cells' centres in the encoded
         (sinh) coordinates and between the bin centres (clamped at the ends); 0 outside the table."""
+        return self.at(self.locate(rho, z, theta, phi))
+
+    def locate(self, rho, z, theta, phi) -> tuple:
+        """Where the points fall in the grid (each axis's lower node and weight, and which points are inside): what
+        ``at`` needs, shared by the tables of one grid."""
         rho_c, z_c = cell_centres(self.rho_edges, self.z_edges)
-        axes = [_linear(_sinh_unit(rho_c, ENCODING["scale"], ENCODING["rho_max"]),
+        axes = (_linear(_sinh_unit(rho_c, ENCODING["scale"], ENCODING["rho_max"]),
                         _sinh_unit(rho, ENCODING["scale"], ENCODING["rho_max"])),
                 _linear(_sinh_unit(z_c, ENCODING["scale"], ENCODING["z_max"]),
                         _sinh_unit(z, ENCODING["scale"], ENCODING["z_max"])),
-                _linear(self.theta, theta), _linear(self.phi, phi)]
-        out = np.zeros(np.shape(rho))
-        for corner in range(16):
-            index, weight = [], 1.0
-            for a, (i, w) in enumerate(axes):
-                upper = (corner >> a) & 1
-                index.append(i + upper)
-                weight = weight * (w if upper else 1.0 - w)
-            out += weight * self.values[tuple(index)]
+                _linear(self.theta, theta), _linear(self.phi, phi))
         inside = (rho <= self.rho_edges[-1]) & (z >= self.z_edges[0]) & (z <= self.z_edges[-1])
-        return np.where(inside, out, 0.0)
+        return axes, inside
+
+    def at(self, located: tuple) -> np.ndarray:
+        """Phi at points ``locate`` found: the 16 corners gathered by flat index, lerped along phi, then theta, z
+        and rho."""
+        axes, inside = located
+        shape = self.values.shape
+        strides = (shape[1] * shape[2] * shape[3], shape[2] * shape[3], shape[3], 1)
+        step = [stride if n > 1 else 0 for stride, n in zip(strides, shape)]  # a single node: no upper neighbour
+        flat = self.values.ravel()
+        base = sum(i * stride for (i, _), stride in zip(axes, strides))
+        values = {}
+        for c in range(8):  # bits: rho, z, theta
+            b = base + sum(((c >> a) & 1) * step[a] for a in range(3))
+            values[c] = flat[b] + axes[3][1] * (flat[b + step[3]] - flat[b])
+        for a in (2, 1, 0):
+            w = axes[a][1]
+            values = {c: values[c] + w * (values[c | (1 << a)] - values[c]) for c in values if not (c >> a) & 1}
+        return np.where(inside, values[0], 0.0)
 
 
 def _linear(nodes: np.ndarray, x):
@@ -248,19 +263,22 @@ def _mirror(points, directions, plane_points, normals, offset: float):
             directions - 2.0 * np.sum(directions * normals, axis=-1, keepdims=True) * normals)
 
 
-def _lookup(table: Table, x, sources, directions, w, ell: float):
-    """Phi at the points x (R, S, 3) of the sources (R or 1, M, 3) along their unit directions (same shape) seen
-    along the propagation directions w (R, 3): (R, S, M), lengths in scene units (mfp ``ell``)."""
+def _coordinates(x, sources, directions, w, ell: float) -> tuple:
+    """(rho, z, theta, phi) in the tables' frame, lengths in mfp, of the points x (R, S, 3) from the sources
+    (R or 1, M, 3) along their unit directions (same shape), seen along the propagation directions w (R, 3):
+    each (R, S, M)."""
     v = x[:, :, None, :] - sources[:, None, :, :]
     d = directions[:, None, :, :]
-    z = np.sum(v * d, axis=-1)
+    z = np.einsum("rsmk,rsmk->rsm", v, np.broadcast_to(d, v.shape))
     radial = v - z[..., None] * d
-    rho = np.linalg.norm(radial, axis=-1)
+    rho = np.sqrt(np.einsum("rsmk,rsmk->rsm", radial, radial))
     e_rho = np.where((rho > 1e-12)[..., None], radial / np.maximum(rho, 1e-12)[..., None], _perpendicular(d))
-    wb = w[:, None, None, :]
-    theta = np.broadcast_to(np.arccos(np.clip(np.sum(wb * d, axis=-1), -1.0, 1.0)), rho.shape)
-    phi = np.abs(np.arctan2(np.sum(np.cross(d, e_rho) * wb, axis=-1), np.sum(e_rho * wb, axis=-1)))
-    return table.lookup(rho / ell, z / ell, theta, phi)
+    wb = np.broadcast_to(w[:, None, None, :], v.shape)
+    cos_theta = np.einsum("rmk,rk->rm", np.broadcast_to(directions, (len(w),) + directions.shape[1:]), w)
+    theta = np.broadcast_to(np.arccos(np.clip(cos_theta, -1.0, 1.0))[:, None, :], rho.shape)
+    phi = np.abs(np.arctan2(np.einsum("rsmk,rsmk->rsm", np.cross(d, e_rho), wb),
+                            np.einsum("rsmk,rsmk->rsm", e_rho, wb)))
+    return rho / ell, z / ell, theta, phi
 
 
 def _camera_image_weight(camera_images, entry_images, zb: float):
@@ -311,11 +329,14 @@ def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, di
             cam_n = shape.normal(enter)[:, None, :]
             camera_images = _mirror(sources, beam_d, enter[:, None, :], cam_n, zb)
             camera_weight = _camera_image_weight(camera_images[0], entry_images[0], zb)[:, None, :]
+        located = next(iter(tables.values())).locate(*_coordinates(x, sources, beam_d, w, ell))
+        if images is not None:
+            at_entry = tables["multiple"].locate(*_coordinates(x, *entry_images, w, ell))
+            at_camera = tables["multiple"].locate(*_coordinates(x, *camera_images, w, ell))
         for kind in kinds:
-            value = _lookup(tables[kind], x, sources, beam_d, w, ell)
+            value = tables[kind].at(located)
             if images is not None and kind == "multiple":
-                value = np.maximum(value - _lookup(tables[kind], x, *entry_images, w, ell)
-                                   - camera_weight * _lookup(tables[kind], x, *camera_images, w, ell), 0.0)
+                value = np.maximum(value - tables[kind].at(at_entry) - camera_weight * tables[kind].at(at_camera), 0.0)
             out[kind][r] += weight * (value @ powers).sum(axis=1) / ell ** 3
         if progress is not None:
             progress(min(start + chunk, len(rows)), len(rows))
