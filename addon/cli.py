@@ -133,6 +133,21 @@ def build_parser() -> argparse.ArgumentParser:
     bm.add_argument("--out", help="the .blend to write (refused if it exists, see --overwrite)")
     bm.add_argument("--overwrite", action="store_true",
                     help="replace an existing --out; without --out, save over --blend")
+
+    cm = sub.add_parser("compare-medium", help="render a neural medium on the comparison sphere: Cycles single "
+                                               "scattering, + Lamina's bake, full path tracing, against a numpy "
+                                               "ground truth; write comparison.png and report.json")
+    g = cm.add_mutually_exclusive_group(required=True)
+    g.add_argument("--preset", help="a neural_medium preset (list-presets --model neural_medium)")
+    g.add_argument("--json", help="a JSON file with a neural_medium dict")
+    cm.add_argument("--scale", type=float, help="scene units per unit length (the sphere has radius 1)")
+    cm.add_argument("--samples", type=int, default=64, help="Cycles samples per pixel")
+    cm.add_argument("--resolution", type=int, default=48, help="image width and height in pixels")
+    cm.add_argument("--truth-paths", type=int, default=1024, help="ground-truth paths per pixel")
+    cm.add_argument("--bounces", type=int, default=1024, help="volume bounces of Cycles' full path tracing")
+    cm.add_argument("--out", required=True, help="the results folder (created; refused if it has files, see "
+                                                 "--overwrite)")
+    cm.add_argument("--overwrite", action="store_true", help="replace the results in an existing --out")
     return ap
 
 
@@ -438,9 +453,26 @@ def cmd_bake_medium(args) -> int:
     return 0
 
 
+def cmd_compare_medium(args) -> int:
+    from .models import neural_medium
+
+    p = neural_medium.params_from_dict(_medium_dict(args))  # checked there, its warnings printed
+    _at_least(args, samples=1, resolution=8, truth_paths=16, bounces=1)
+    out = _checked(paths.output_folder, "--out", args.out, args.overwrite)
+    from .operators import medium_compare
+
+    sizes = medium_compare.Sizes(samples=args.samples, resolution=args.resolution, truth_paths=args.truth_paths,
+                                 full_bounces=args.bounces)
+    report = _in_results_folder(out, lambda folder: medium_compare.compare_medium(p, sizes, folder,
+                                                                                label=args.preset or "custom"))
+    print(medium_compare.summary_lines(report))
+    print(f"lamina: wrote {out}")
+    return 0
+
+
 COMMANDS = {"list-presets": cmd_list_presets, "make-material": cmd_make_material, "compare": cmd_compare,
             "demo": cmd_demo, "bench": cmd_bench, "bake": cmd_bake, "add-porous": cmd_add_porous,
-            "bake-medium": cmd_bake_medium}
+            "bake-medium": cmd_bake_medium, "compare-medium": cmd_compare_medium}
 
 # Lamina's temporary names (``bake.exr.atomic_path``'s ".<name>.<random>.tmp.<ext>", ``paths.staged_folder``'s
 # ".<name>.<random>.lamina-tmp"): a message shows the final name instead.

@@ -164,6 +164,12 @@ REFUSALS = [
       "x.blend"), "select a mesh object"),
     (("bake-medium", "--blend", "corrupt.blend", "--object", "x", "--preset", "milk", "--out", "x.blend"),
      "Blender cannot read it"),
+    # compare-medium
+    (("compare-medium", "--preset", "fluff", "--out", "new"), "unknown neural_medium preset 'fluff'"),
+    (("compare-medium", "--preset", "milk", "--samples", "0", "--out", "new"), "--samples must be ≥ 1, got 0"),
+    (("compare-medium", "--json", "zero_medium.json", "--out", "new"), "zero density"),
+    (("compare-medium", "--preset", "milk", "--out", "results"), "results"),
+    (("compare-medium", "--out", "new"), "one of the arguments --preset --json is required"),
     # add-porous
     (("add-porous", "--blend", "in.blend", "--material", "Nope", "--preset", "dust_on_wood", "--out", "x.blend"),
      "--material 'Nope': no such material in"),

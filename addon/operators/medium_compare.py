@@ -1,0 +1,124 @@
+"""Compare a neural medium on the comparison sphere (bpy): Cycles single scattering, single scattering + Lamina's
+bake, and Cycles' full volumetric path tracing, each with its render time and its error against the numpy ground
+truth (``reference/neural_medium_truth.py``, all orders) and against Cycles' full path tracing. Shared by
+``lamina compare-medium`` (pictures and report.json) and the bench. The user's scene is untouched: everything
+renders in ``cycles_render``'s temporary scene, whose sun the bake uses.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from ..bake import neural_medium as nb
+from ..bake.exr import atomic_path, write_png
+from ..nodes import neural_medium as medium_nodes
+from ..reference import metrics
+from ..reference import neural_medium_truth as truth
+from ..reference import scenes as S
+from . import blend_io, medium_bake
+from .compare_run import comparison_picture, write_text_atomic
+from .cycles_render import render_cycles
+
+CACHE = Path(os.environ.get("LAMINA_CACHE", Path.home() / ".cache" / "lamina")) / "neural-medium-truth"
+SINGLE, BAKED, FULL = "single scattering", "single + Lamina bake", "Cycles full path tracing"
+
+
+@dataclass(frozen=True)
+class Sizes:
+    samples: int = 64
+    resolution: int = 48
+    truth_paths: int = 1024
+    full_bounces: int = 1024
+    bake: nb.Settings = nb.Settings()
+
+
+def scene(resolution: int) -> S.Scene:
+    return S.sphere_scene(resolution=resolution, sphere_segments=64, sphere_rings=32)
+
+
+def cached_truth(p, spec: S.Scene, paths: int) -> dict:
+    """The numpy truth of ``p`` on ``spec`` (all orders, its standard error, single scattering), cached by content
+    hash outside the repository (a second run reuses it)."""
+    key = hashlib.sha256(json.dumps([p.to_dict(), spec.name, spec.width, spec.height, paths, 1],
+                                    sort_keys=True).encode()).hexdigest()[:16]
+    path = CACHE / f"{key}.npz"
+    if path.exists():
+        with np.load(path) as f:
+            return {k: f[k] for k in f.files}
+    t = truth.render(p, truth.Sphere(), spec, paths, seed=1)
+    out = {"total": t["total"], "order1": t["order1"], "mask": t["mask"],
+           "noise": np.sqrt(sum(t["noise"][g] ** 2 for g in truth.GROUPS)), "seconds": np.array(t["seconds"])}
+    CACHE.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, **out)
+    return out
+
+
+def _psnr(img, ref, mask) -> float:
+    mse = float(np.mean((img[mask] - ref[mask]) ** 2))
+    peak = float(ref[mask].max())
+    return 20.0 * math.log10(peak / math.sqrt(mse)) if mse > 0 and peak > 0 else math.inf
+
+
+def compare_medium(p, sizes: Sizes = Sizes(), out_dir: str | None = None, label: str = "custom") -> dict:
+    """The report (module docstring); with ``out_dir``, also ``comparison.png`` (the three Cycles images and the
+    truth, then each one's error map against the truth) and ``report.json`` there."""
+    spec = scene(sizes.resolution)
+    t = cached_truth(p, spec, sizes.truth_paths)
+    mask = S.scene_mask(spec) & t["mask"].astype(bool)
+    bake_info: dict = {}
+
+    def bake(scene_, obj):
+        scene_.view_layers[0].update()  # the temporary sun's matrix
+        start = time.perf_counter()
+        tables = nb.channel_tables(p)
+        bake_info["tables_seconds"] = time.perf_counter() - start
+        result = medium_bake.run(obj, scene_, scene_.view_layers[0].depsgraph, p, sizes.bake, tables=tables)
+        bake_info.update(result["record"])
+        bake_info["bake_seconds"] = time.perf_counter() - start - bake_info["tables_seconds"]
+
+    path = os.path.join(bpy.app.tempdir, "lamina_medium.exr")
+    before = blend_io.snapshot()
+    try:
+        mat = medium_nodes.new_material(p)
+        images = {SINGLE: render_cycles(mat, spec, sizes.samples, 0, path),
+                  BAKED: render_cycles(mat, spec, sizes.samples, 0, path, prepare=bake),
+                  FULL: render_cycles(mat, spec, sizes.samples, 0, path, bounces=sizes.full_bounces)}
+    finally:
+        blend_io.remove_new_data(before)
+    ref, full = t["total"], images[FULL][0]
+    report = {"label": label, "params": p.to_dict(), "resolution": sizes.resolution, "samples": sizes.samples,
+              "mean_free_paths_across": float(truth.optical_depth(p, 2.0).mean()),
+              "truth": {"paths": sizes.truth_paths, "relative_noise": float(np.sqrt(np.mean(t["noise"][mask] ** 2))
+                                                                            / ref[mask].mean())},
+              "bake": bake_info, "forms": {}}
+    for name, (img, seconds) in images.items():
+        report["forms"][name] = {"seconds": seconds, "energy_error": float(img[mask].mean() / ref[mask].mean() - 1.0),
+                                 "rel_rmse": float(metrics.rel_rmse(img, ref, mask)), "psnr": _psnr(img, ref, mask),
+                                 "rel_rmse_vs_full": float(metrics.rel_rmse(img, full, mask)),
+                                 "finite": bool(np.isfinite(img).all()), "min": float(img.min())}
+    if out_dir is not None:
+        picture = comparison_picture([img for img, _ in images.values()] + [ref], ref, mask)
+        write_png(os.path.join(out_dir, "comparison.png"), picture)
+        write_text_atomic(os.path.join(out_dir, "report.json"), json.dumps(report, indent=1))
+    return report
+
+
+def summary_lines(report: dict) -> str:
+    lines = [f"{report['label']}: {report['mean_free_paths_across']:.1f} mean free paths across, truth noise "
+             f"{report['truth']['relative_noise']:.1%}"]
+    for name, f in report["forms"].items():
+        lines.append(f"  {name:28s} {f['seconds']:7.2f} s  energy {f['energy_error']:+.1%}  rel. RMSE "
+                     f"{f['rel_rmse']:.1%}  vs full path tracing {f['rel_rmse_vs_full']:.1%}")
+    b = report["bake"]
+    lines.append(f"  bake: {b['points']} points, {b['beams']} beams, {b['bake_seconds']:.1f} s (tables "
+                 f"{b['tables_seconds']:.1f} s)")
+    return "\n".join(lines)
