@@ -281,12 +281,16 @@ def _coordinates(x, sources, directions, w, ell: float) -> tuple:
     return rho / ell, z / ell, theta, phi
 
 
+IMAGE_OFFSET = 1.0  # z_b; chosen by ``python -m training.medium_gather_check --offsets`` (docs/training.md)
+
+
 def _camera_image_weight(camera_images, entry_images, zb: float):
     """(R, M) weight of the image across the camera ray's entry plane, from how far it lies from the beam's own
-    image: 0 within z_b (the planes nearly coincide: the dipole's single image), rising linearly to 1 at 3 z_b.
-    Chosen among 0 / 0.5 / 1 / 2 z_b offsets on the five spheres of training/medium_gather_check.py (docs/training.md):
-    a calibration on those cases, not a derivation."""
-    return np.clip((np.linalg.norm(camera_images - entry_images, axis=-1) - zb) / (2.0 * zb), 0.0, 1.0)
+    image: 0 within IMAGE_OFFSET z_b (the planes nearly coincide: the dipole's single image), rising linearly to 1
+    2 z_b further. The offset is a calibration on the spheres of training/medium_gather_check.py, not a
+    derivation."""
+    apart = np.linalg.norm(camera_images - entry_images, axis=-1)
+    return np.clip((apart - IMAGE_OFFSET * zb) / (2.0 * zb), 0.0, 1.0)
 
 
 def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, directions, kinds=KINDS,
