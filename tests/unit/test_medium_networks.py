@@ -90,3 +90,31 @@ def test_unknown_network_and_missing_weights_are_clear(tmp_path):
         nm.network("triple")
     with pytest.raises(FileNotFoundError, match="missing"):
         nm.network("double", tmp_path)
+
+
+# ------------------------------------------------------------------------------------------ the shipped networks
+
+def test_the_shipped_networks_are_the_papers_size_and_trained_on_the_whole_grid():
+    total = 0
+    for kind in nm.KINDS:
+        net = nm.network(kind)
+        total += sum(np.asarray(w, np.float32).nbytes + np.asarray(b, np.float32).nbytes
+                     for w, b in zip(net.weights, net.biases))
+        m = net.manifest
+        assert len(m["data"]["materials"]) == 42 and m["activation"] == "tanh"
+        assert {"rho_edges", "z_edges", "theta", "phi"} <= set(m["grid"])
+        assert m["energy_ratio"]["off_grid"]["per_material"]  # evaluated off the grid too
+    assert total <= 24 * 1024  # the paper's two networks: 11.8 KB each
+
+
+@pytest.mark.parametrize("albedo, g", [(0.0, 0.0), (1.0, 0.0), (0.5, 0.99), (0.5, -0.99), (0.999, 0.95)])
+def test_the_shipped_tables_are_finite_and_non_negative_at_the_extremes(albedo, g):
+    from addon.bake import neural_medium as nb
+    from addon.models import neural_medium as model
+
+    p = model.params_from_dict({"sigma_s": [albedo] * 3, "sigma_a": [1.0 - albedo] * 3, "g": g, "scale": 1.0})
+    tables = nb.channel_tables(p)
+    for kind in nm.KINDS:
+        v = tables[0][kind].values
+        assert np.all(np.isfinite(v)) and v.min() >= 0.0
+    assert np.isfinite(nm.extrapolation_distance(albedo, g))
