@@ -141,6 +141,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--preset", help="a neural_medium preset (list-presets --model neural_medium)")
     g.add_argument("--json", help="a JSON file with a neural_medium dict")
     cm.add_argument("--scale", type=float, help="scene units per unit length (the sphere has radius 1)")
+    cm.add_argument("--shape", default="sphere", choices=("sphere", "box", "torus"),
+                    help="what the medium fills: the comparison sphere, a 1.6 x 1.6 x 0.5 box, a torus (no numpy "
+                         "truth: measured against Cycles' full path tracing)")
     cm.add_argument("--samples", type=int, default=64, help="Cycles samples per pixel")
     cm.add_argument("--resolution", type=int, default=48, help="image width and height in pixels")
     cm.add_argument("--truth-paths", type=int, default=1024, help="ground-truth paths per pixel")
@@ -463,8 +466,8 @@ def cmd_compare_medium(args) -> int:
 
     sizes = medium_compare.Sizes(samples=args.samples, resolution=args.resolution, truth_paths=args.truth_paths,
                                  full_bounces=args.bounces)
-    report = _in_results_folder(out, lambda folder: medium_compare.compare_medium(p, sizes, folder,
-                                                                                label=args.preset or "custom"))
+    report = _in_results_folder(out, lambda folder: medium_compare.compare_medium(
+        p, sizes, folder, label=args.preset or "custom", shape=args.shape))
     print(medium_compare.summary_lines(report))
     print(f"lamina: wrote {out}")
     return 0

@@ -12,7 +12,9 @@ from ..reference import neural_medium as nm
 from .common import pct
 
 MODEL = model.ID
-CASES = (("cloud", 0.5), ("candle", 0.1), ("milk", 0.25))  # (preset, scale): 4.4, 10 and 10.7 mfp across
+# (preset, scale, shape): 4.4, 10 and 10.7 mfp across the sphere; a thick tile and a torus (thin parts, not convex)
+CASES = (("cloud", 0.5, "sphere"), ("candle", 0.1, "sphere"), ("milk", 0.25, "sphere"), ("cloud", 0.5, "box"),
+         ("milk", 0.25, "box"), ("milk", 0.25, "torus"))
 
 
 @lru_cache(maxsize=2)
@@ -21,7 +23,8 @@ def measure(samples: int) -> list[dict]:
 
     sizes = medium_compare.Sizes(samples=samples)
     return [medium_compare.compare_medium(model.params_from_dict({**presets.load(MODEL, name), "scale": scale}),
-                                          sizes, label=f"{name} ×{scale:g}") for name, scale in CASES]
+                                          sizes, label=f"{name} ×{scale:g}", shape=shape)
+            for name, scale, shape in CASES]
 
 
 def network_lines() -> list[str]:
@@ -45,21 +48,27 @@ def accuracy(sizes) -> str:
     out = ["## Neural media (neural_medium)", "",
            "The shipped networks (`make medium-networks`; the energy ratio is the power of the table a network "
            "reconstructs over the Monte Carlo table's, minus 1, the paper's measure):", "", *network_lines(), "",
-           f"What Cycles renders on the comparison sphere ({s.resolution} px, a 64 × 32 mesh, {s.samples} samples, "
-           f"the scene's sun; `lamina compare-medium`) against the numpy ground truth "
-           f"(`reference/neural_medium_truth.py`, {s.truth_paths} paths per pixel, all orders; its own noise in the "
-           f"last column) and against Cycles' full volumetric path tracing ({s.full_bounces} volume bounces). The "
-           f"bake: the networks' tables, {s.bake.cells} × {s.bake.cells} beams per lamp, {s.bake.steps} steps per "
-           "ray, multiple scattering with the boundary's image sources, linear in the direction per vertex.", "",
-           "| medium (scale) | mfp across | form | energy vs truth | rel. RMSE vs truth | PSNR | rel. RMSE vs "
-           "Cycles full | truth noise |", "|---|---|---|---|---|---|---|---|"]
+           f"What Cycles renders ({s.resolution} px, {s.samples} samples, the comparison scene's sun; `lamina "
+           "compare-medium --shape ...`) against Cycles' own full volumetric path tracing "
+           f"({s.full_bounces} volume bounces) and, for the sphere (a 64 × 32 mesh) and the box (1.6 × 1.6 × 0.5 "
+           f"units), the numpy ground truth (`reference/neural_medium_truth.py`, {s.truth_paths} paths per pixel, all "
+           "orders; its own noise in the last column). The torus (radii 0.65 and 0.3) has no numpy truth. The bake: "
+           f"the networks' tables, {s.bake.cells} × {s.bake.cells} beams per lamp, {s.bake.steps} steps per ray, "
+           "multiple scattering with the boundary's image sources, linear in the direction per vertex. \"mfp\" is "
+           "the mean free paths per 2 scene units (the sphere's diameter).", "",
+           "| medium (scale) | shape | mfp | form | energy vs Cycles full | rel. RMSE vs Cycles full | energy vs "
+           "truth | rel. RMSE vs truth | PSNR vs truth | truth noise |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         for label, f in r["forms"].items():
-            out.append(f"| {r['label']} | {r['mean_free_paths_across']:.1f} | {label} | {f['energy_error']:+.1%} | "
-                       f"{pct(f['rel_rmse'])} | {f['psnr']:.1f} dB | {pct(f['rel_rmse_vs_full'])} | "
-                       f"{pct(r['truth']['relative_noise'])} |")
-    out += ["", "Not measured yet: a slab and a mesh such as Suzanne, Cycles' random-walk subsurface scattering of "
-                "the same medium, a camera moved after the bake, low albedo (oil).", ""]
+            if r["truth"] is None:
+                numpy = "n/a | n/a | n/a | n/a"
+            else:
+                numpy = (f"{f['energy_error']:+.1%} | {pct(f['rel_rmse'])} | {f['psnr']:.1f} dB | "
+                         f"{pct(r['truth']['relative_noise'])}")
+            out.append(f"| {r['label']} | {r['shape']} | {r['mean_free_paths_across']:.1f} | {label} | "
+                       f"{f['energy_vs_full']:+.1%} | {pct(f['rel_rmse_vs_full'])} | {numpy} |")
+    out += ["", "Not measured yet: Cycles' random-walk subsurface scattering of the same medium, a camera moved after "
+                "the bake, low albedo (oil).", ""]
     return "\n".join(out)
 
 
@@ -75,7 +84,7 @@ def speed(sizes) -> str:
     for r in rows:
         f, b = r["forms"], r["bake"]
         single, baked, full = f[SINGLE]["seconds"], f[BAKED]["seconds"], f[FULL]["seconds"]
-        out.append(f"| {r['label']} | {single:.2f} s | {baked:.2f} s | {baked / single:.2f}× | {full:.2f} s | "
+        out.append(f"| {r['label']}, {r['shape']} | {single:.2f} s | {baked:.2f} s | {baked / single:.2f}× | {full:.2f} s | "
                    f"{full / baked:.1f}× | {b['tables_seconds']:.1f} s | {b['points']}, {b['beams']}, "
                    f"{b['bake_seconds']:.1f} s | {b['points'] / b['bake_seconds']:.0f} |")
     return "\n".join(out + [""])

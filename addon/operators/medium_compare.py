@@ -1,8 +1,10 @@
-"""Compare a neural medium on the comparison sphere (bpy): Cycles single scattering, single scattering + Lamina's
-bake, and Cycles' full volumetric path tracing, each with its render time and its error against the numpy ground
-truth (``reference/neural_medium_truth.py``, all orders) and against Cycles' full path tracing. Shared by
-``lamina compare-medium`` (pictures and report.json) and the bench. The user's scene is untouched: everything
-renders in ``cycles_render``'s temporary scene, whose sun the bake uses.
+"""Compare a neural medium (bpy): Cycles single scattering, single scattering + Lamina's bake, and Cycles' full
+volumetric path tracing, each with its render time and its error against Cycles' full path tracing (the external
+truth) and, for the shapes it renders (sphere, box), the numpy ground truth (``reference/neural_medium_truth.py``,
+all orders). Shapes: the comparison sphere, a box (a thick tile: thin parts at its edges) and a torus (closed, not
+convex). Shared by ``lamina compare-medium`` (pictures and report.json) and the bench. The user's scene is
+untouched: everything renders in ``cycles_render``'s temporary scene (its mesh replaced for the box and torus),
+whose sun the bake uses.
 """
 from __future__ import annotations
 
@@ -14,7 +16,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import bpy
+import bpy  # noqa: I001 - the bpy module must be imported before bmesh
+import bmesh
 import numpy as np
 
 from ..bake import neural_medium as nb
@@ -40,20 +43,71 @@ class Sizes:
     bake: nb.Settings = nb.Settings()
 
 
+SHAPES = ("sphere", "box", "torus")
+BOX = truth.Box((-0.8, -0.8, -0.25), (0.8, 0.8, 0.25))
+TORUS = (0.65, 0.3)  # major and minor radius
+
+
 def scene(resolution: int) -> S.Scene:
     return S.sphere_scene(resolution=resolution, sphere_segments=64, sphere_rings=32)
 
 
-def cached_truth(p, spec: S.Scene, paths: int) -> dict:
-    """The numpy truth of ``p`` on ``spec`` (all orders, its standard error, single scattering), cached by content
-    hash outside the repository (a second run reuses it)."""
-    key = hashlib.sha256(json.dumps([p.to_dict(), spec.name, spec.width, spec.height, paths, 1],
-                                    sort_keys=True).encode()).hexdigest()[:16]
+def _numpy_shape(shape: str):
+    return {"sphere": truth.Sphere(), "box": BOX}.get(shape)
+
+
+def _box_mesh(cuts: int = 23):
+    """The box with every face cut into a grid (the bake lives at vertices: large faces would interpolate it)."""
+    bm = bmesh.new()
+    try:
+        bmesh.ops.create_cube(bm, size=2.0)
+        bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=cuts, use_grid_fill=True)
+        half = [0.5 * (b - a) for a, b in zip(BOX.lo, BOX.hi)]
+        centre = [0.5 * (a + b) for a, b in zip(BOX.lo, BOX.hi)]
+        verts = [tuple(c + h * x for c, h, x in zip(centre, half, v.co)) for v in bm.verts]
+        faces = [tuple(v.index for v in f.verts) for f in bm.faces]
+    finally:
+        bm.free()
+    return verts, faces
+
+
+def _torus_mesh(segments: int = 48, sides: int = 16):
+    major, minor = TORUS
+    verts, faces = [], []
+    for i in range(segments):
+        u = 2.0 * math.pi * i / segments
+        for j in range(sides):
+            v = 2.0 * math.pi * j / sides
+            r = major + minor * math.cos(v)
+            verts.append((r * math.cos(u), r * math.sin(u), minor * math.sin(v)))
+    for i in range(segments):
+        for j in range(sides):
+            a, b = i * sides + j, ((i + 1) % segments) * sides + j
+            faces.append((a, b, ((i + 1) % segments) * sides + (j + 1) % sides, i * sides + (j + 1) % sides))
+    return verts, faces
+
+
+def _reshape(obj, shape: str) -> None:
+    """Give the temporary scene's object the ``shape``'s mesh (the sphere stays as cycles_render made it)."""
+    if shape == "sphere":
+        return
+    verts, faces = _box_mesh() if shape == "box" else _torus_mesh()
+    mesh = obj.data
+    mesh.clear_geometry()
+    mesh.from_pydata(verts, [], faces)
+    mesh.update()
+
+
+def cached_truth(p, spec: S.Scene, paths: int, shape=truth.Sphere(), shape_name: str = "sphere") -> dict:
+    """The numpy truth of ``p`` filling ``shape`` under ``spec`` (all orders, its standard error, single
+    scattering), cached by content hash outside the repository (a second run reuses it)."""
+    key = hashlib.sha256(json.dumps([p.to_dict(), spec.name, spec.width, spec.height, paths, shape_name, repr(shape),
+                                     1], sort_keys=True).encode()).hexdigest()[:16]
     path = CACHE / f"{key}.npz"
     if path.exists():
         with np.load(path) as f:
             return {k: f[k] for k in f.files}
-    t = truth.render(p, truth.Sphere(), spec, paths, seed=1)
+    t = truth.render(p, shape, spec, paths, seed=1)
     out = {"total": t["total"], "order1": t["order1"], "mask": t["mask"],
            "noise": np.sqrt(sum(t["noise"][g] ** 2 for g in truth.GROUPS)), "seconds": np.array(t["seconds"])}
     CACHE.mkdir(parents=True, exist_ok=True)
@@ -68,15 +122,22 @@ def _psnr(img, ref, mask) -> float:
     return 20.0 * math.log10(peak / math.sqrt(mse)) if mse > 0 and peak > 0 else math.inf
 
 
-def compare_medium(p, sizes: Sizes = Sizes(), out_dir: str | None = None, label: str = "custom") -> dict:
+def compare_medium(p, sizes: Sizes = Sizes(), out_dir: str | None = None, label: str = "custom",
+                   shape: str = "sphere") -> dict:
     """The report (module docstring); with ``out_dir``, also ``comparison.png`` (the three Cycles images and the
     truth, then each one's error map against the truth) and ``report.json`` there."""
+    if shape not in SHAPES:
+        raise ValueError(f"unknown shape {shape!r}; expected one of {', '.join(SHAPES)}")
     spec = scene(sizes.resolution)
-    t = cached_truth(p, spec, sizes.truth_paths)
-    mask = S.scene_mask(spec) & t["mask"].astype(bool)
+    numpy_shape = _numpy_shape(shape)
+    t = cached_truth(p, spec, sizes.truth_paths, numpy_shape, shape) if numpy_shape is not None else None
     bake_info: dict = {}
 
+    def plain(scene_, obj):
+        _reshape(obj, shape)
+
     def bake(scene_, obj):
+        _reshape(obj, shape)
         scene_.view_layers[0].update()  # the temporary sun's matrix
         start = time.perf_counter()
         tables = nb.channel_tables(p)
@@ -89,32 +150,42 @@ def compare_medium(p, sizes: Sizes = Sizes(), out_dir: str | None = None, label:
     before = blend_io.snapshot()
     try:
         mat = medium_nodes.new_material(p)
-        images = {SINGLE: render_cycles(mat, spec, sizes.samples, 0, path),
+        images = {SINGLE: render_cycles(mat, spec, sizes.samples, 0, path, prepare=plain),
                   BAKED: render_cycles(mat, spec, sizes.samples, 0, path, prepare=bake),
-                  FULL: render_cycles(mat, spec, sizes.samples, 0, path, bounces=sizes.full_bounces)}
+                  FULL: render_cycles(mat, spec, sizes.samples, 0, path, bounces=sizes.full_bounces,
+                                      prepare=plain)}
     finally:
         blend_io.remove_new_data(before)
-    ref, full = t["total"], images[FULL][0]
-    report = {"label": label, "params": p.to_dict(), "resolution": sizes.resolution, "samples": sizes.samples,
-              "mean_free_paths_across": float(truth.optical_depth(p, 2.0).mean()),
-              "truth": {"paths": sizes.truth_paths, "relative_noise": float(np.sqrt(np.mean(t["noise"][mask] ** 2))
-                                                                            / ref[mask].mean())},
-              "bake": bake_info, "forms": {}}
+    full = images[FULL][0]
+    if t is not None:
+        ref, mask = t["total"], t["mask"].astype(bool) & (S.scene_mask(spec) if shape == "sphere" else True)
+        truth_report = {"paths": sizes.truth_paths,
+                        "relative_noise": float(np.sqrt(np.mean(t["noise"][mask] ** 2)) / ref[mask].mean())}
+    else:  # no numpy truth for this shape: Cycles' full path tracing is the truth
+        ref, mask = full, np.max(images[SINGLE][0], axis=-1) > 0.0
+        truth_report = None
+    report = {"label": label, "shape": shape, "params": p.to_dict(), "resolution": sizes.resolution,
+              "samples": sizes.samples, "mean_free_paths_across": float(truth.optical_depth(p, 2.0).mean()),
+              "truth": truth_report, "bake": bake_info, "forms": {}}
     for name, (img, seconds) in images.items():
         report["forms"][name] = {"seconds": seconds, "energy_error": float(img[mask].mean() / ref[mask].mean() - 1.0),
                                  "rel_rmse": float(metrics.rel_rmse(img, ref, mask)), "psnr": _psnr(img, ref, mask),
+                                 "energy_vs_full": float(img[mask].mean() / full[mask].mean() - 1.0),
                                  "rel_rmse_vs_full": float(metrics.rel_rmse(img, full, mask)),
                                  "finite": bool(np.isfinite(img).all()), "min": float(img.min())}
     if out_dir is not None:
-        picture = comparison_picture([img for img, _ in images.values()] + [ref], ref, mask)
+        shown = [img for img, _ in images.values()] + ([ref] if t is not None else [])
+        picture = comparison_picture(shown, ref, mask)
         write_png(os.path.join(out_dir, "comparison.png"), picture)
         write_text_atomic(os.path.join(out_dir, "report.json"), json.dumps(report, indent=1))
     return report
 
 
 def summary_lines(report: dict) -> str:
-    lines = [f"{report['label']}: {report['mean_free_paths_across']:.1f} mean free paths across, truth noise "
-             f"{report['truth']['relative_noise']:.1%}"]
+    noise = (f"numpy truth noise {report['truth']['relative_noise']:.1%}" if report["truth"]
+             else "no numpy truth: errors against Cycles' full path tracing")
+    lines = [f"{report['label']} ({report['shape']}): {report['mean_free_paths_across']:.1f} mean free paths per 2 "
+             f"units, {noise}"]
     for name, f in report["forms"].items():
         lines.append(f"  {name:28s} {f['seconds']:7.2f} s  energy {f['energy_error']:+.1%}  rel. RMSE "
                      f"{f['rel_rmse']:.1%}  vs full path tracing {f['rel_rmse_vs_full']:.1%}")
