@@ -25,6 +25,7 @@ import hashlib
 import json
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -59,15 +60,18 @@ def reconstruction_grid(net) -> tuple:
 
 def channel_tables(p, folder=nm.WEIGHTS) -> list[dict]:
     """Per RGB channel, {kind: Table} reconstructed from the shipped networks for the channel's albedo and the
-    medium's g (Sec. 3.7); channels with the same albedo share their tables."""
-    nets = {kind: nm.network(kind, folder) for kind in nm.KINDS}
-    done: dict = {}
-    out = []
-    for albedo in p.albedo:
-        if albedo not in done:
-            done[albedo] = {kind: nm.Table(nm.table(net, albedo, p.g, *reconstruction_grid(net)),
-                                           *reconstruction_grid(net)) for kind, net in nets.items()}
-        out.append(done[albedo])
+    medium's g (Sec. 3.7); channels with the same albedo share their tables, and the last few materials are kept
+    (a re-bake does not reconstruct them again)."""
+    return [_material_tables(float(albedo), float(p.g), str(folder)) for albedo in p.albedo]
+
+
+@lru_cache(maxsize=6)
+def _material_tables(albedo: float, g: float, folder: str) -> dict:
+    out = {}
+    for kind in nm.KINDS:
+        net = nm.network(kind, folder)
+        grid = reconstruction_grid(net)
+        out[kind] = nm.Table(nm.table(net, albedo, g, *grid), *grid)
     return out
 
 
