@@ -198,3 +198,38 @@ def test_compare_medium_writes_its_report_and_the_bake_closes_most_of_the_gap(ta
     assert abs(forms[medium_compare.FULL]["energy_error"]) < 0.1  # Cycles' own path tracing agrees with the truth
     assert (tmp_path / "comparison.png").exists() and json.loads((tmp_path / "report.json").read_text())["bake"]
     assert len(list((tmp_path / "cache").glob("*.npz"))) == 1  # the truth, cached
+
+
+def test_a_point_lamp_of_power_p_has_the_intensity_the_bake_assumes(tmp_path):
+    """The bake's point and spot lamps radiate P / (4 pi) W/sr (``medium_bake.lamp_beams``): a white Lambertian top
+    of the sphere D below a point lamp of radius 0 shows (1 / pi) I / D^2."""
+    from addon.nodes.material import empty_material
+
+    mat, tree, out = empty_material("white")
+    diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    diffuse.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    tree.links.new(diffuse.outputs[0], out.inputs["Surface"])
+    power, distance = 1000.0, 3.0
+    lamps = []
+
+    def point_lamp(scene, obj):
+        for o in scene.objects:
+            if o.type == "LIGHT":
+                o.data.energy = 0.0
+        lamp = bpy.data.objects.new("point", bpy.data.lights.new("point", type="POINT"))
+        lamp.data.energy, lamp.data.shadow_soft_size = power, 0.0
+        lamp.location = (0.0, 0.0, 1.0 + distance)
+        scene.collection.objects.link(lamp)
+        lamps.append(lamp)
+
+    spec = S.sphere_scene(resolution=24)
+    try:
+        img, _ = render_cycles(mat, spec, 64, 0, str(tmp_path / "point.exr"), prepare=point_lamp)
+    finally:
+        for lamp in lamps:
+            data = lamp.data
+            bpy.data.objects.remove(lamp)
+            bpy.data.lights.remove(data)
+    centre = img[11:13, 11:13].mean(axis=(0, 1))
+    intensity = power / (4.0 * np.pi)
+    np.testing.assert_allclose(centre, intensity / (np.pi * distance ** 2), rtol=0.03)
