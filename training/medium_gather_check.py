@@ -19,7 +19,8 @@ from addon.reference import neural_medium_truth as truth
 from addon.reference import scenes as S
 from training import medium_tracer as mt
 
-CASES = (("cloud", 0.5), ("cloud", 0.1), ("lucy", 0.2), ("milk", 0.25), ("milk", 0.05))  # (preset, scale); green channel
+# (preset, scale); the green channel
+CASES = (("cloud", 0.5), ("cloud", 0.1), ("lucy", 0.2), ("milk", 0.25), ("milk", 0.05))
 RESOLUTION, PATHS, PHOTONS, DOUBLE_PHOTONS = 16, 1024, 60_000, 600_000
 
 

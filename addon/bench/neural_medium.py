@@ -103,8 +103,8 @@ def accuracy(sizes) -> str:
                        f"{f['energy_vs_full']:+.1%} | {pct(f['rel_rmse_vs_full'])} | {numpy} |")
     out += ["", "The bake is linear in the view direction per vertex and belongs to no camera: against the gather "
                 "itself along each view (numpy, the cloud ×0.5 on the unit sphere, points the view sees), the fit's "
-                "error wherever the camera is:", "", "| view tilted from +z towards +x (the sun's side) | mean | rel. RMSE |",
-            "|---|---|---|"]
+                "error wherever the camera is:", "",
+            "| view tilted from +z towards +x (the sun's side) | mean | rel. RMSE |", "|---|---|---|"]
     out += [f"| {r['angle']:g}° | {r['mean']:+.1%} | {pct(r['rel_rmse'])} |" for r in view_fit_rows()]
     out += ["", "Not measured yet: Cycles' random-walk subsurface scattering of the same medium, low albedo (oil).",
             ""]
@@ -123,7 +123,7 @@ def speed(sizes) -> str:
     for r in rows:
         f, b = r["forms"], r["bake"]
         single, baked, full = f[SINGLE]["seconds"], f[BAKED]["seconds"], f[FULL]["seconds"]
-        out.append(f"| {r['label']}, {r['shape']} | {single:.2f} s | {baked:.2f} s | {baked / single:.2f}× | {full:.2f} s | "
-                   f"{full / baked:.1f}× | {b['tables_seconds']:.1f} s | {b['points']}, {b['beams']}, "
+        out.append(f"| {r['label']}, {r['shape']} | {single:.2f} s | {baked:.2f} s | {baked / single:.2f}× | "
+                   f"{full:.2f} s | {full / baked:.1f}× | {b['tables_seconds']:.1f} s | {b['points']}, {b['beams']}, "
                    f"{b['bake_seconds']:.1f} s | {b['points'] / b['bake_seconds']:.0f} |")
     return "\n".join(out + [""])

@@ -130,7 +130,7 @@ def test_a_point_light_inside_the_object_is_refused():
         nm.point_beams(truth.Sphere(), (0.0, 0.0, 0.5), 1.0, 8)
 
 
-# ------------------------------------------------------------------------------------------ the bake (bake/neural_medium.py)
+# ---------------------------------------------------------------------------------- the bake (bake/neural_medium.py)
 
 def test_the_linear_fit_is_exact_for_linear_radiance():
     from addon.bake import neural_medium as nb
