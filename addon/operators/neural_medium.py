@@ -149,6 +149,7 @@ class LAMINA_OT_bake_medium(bpy.types.Operator):
 
     _timer = None
     _steps = None
+    _object = ""
 
     @classmethod
     def poll(cls, context):
@@ -159,6 +160,7 @@ class LAMINA_OT_bake_medium(bpy.types.Operator):
 
     def _start(self, context):
         obj = context.active_object
+        self._object = obj.name  # the bake is applied to this object, wherever the selection goes meanwhile
         p = medium_nodes.current_params(medium_bake.medium_material(obj))
         self._steps = medium_bake.bake_steps(obj, context.scene, context.evaluated_depsgraph_get(), p,
                                              nb.Settings(self.cells, self.steps))
@@ -213,7 +215,11 @@ class LAMINA_OT_bake_medium(bpy.types.Operator):
         context.workspace.status_text_set(None)
 
     def _finish(self, context, result):
-        medium_bake.apply(context.active_object, result)
+        obj = bpy.data.objects.get(self._object)
+        if obj is None or obj.type != "MESH" or len(obj.data.vertices) != len(result["coefficients"]):
+            self.report({"ERROR"}, f"{self._object} changed during the bake: nothing was written; bake again")
+            return {"CANCELLED"}
+        medium_bake.apply(obj, result)
         for note in result["notes"]:
             self.report({"WARNING"}, note)
         r = result["record"]
