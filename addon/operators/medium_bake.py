@@ -98,9 +98,10 @@ def surface_points(obj) -> tuple[np.ndarray, np.ndarray]:
     """World-space vertex positions and unit vertex normals of the mesh."""
     mesh = obj.data
     n = len(mesh.vertices)
-    co = np.empty(n * 3)
+    co, normals = np.empty(n * 3), np.empty(n * 3)
     mesh.vertices.foreach_get("co", co)
-    normals = np.array([tuple(v.normal) for v in mesh.vertices]) if n else np.zeros((0, 3))
+    mesh.vertex_normals.foreach_get("vector", normals)
+    normals = normals.reshape(n, 3)
     m = np.array(obj.matrix_world)
     points = co.reshape(n, 3) @ m[:3, :3].T + m[:3, 3]
     normals = normals @ np.linalg.inv(m[:3, :3])
