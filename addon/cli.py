@@ -88,7 +88,8 @@ def build_parser() -> argparse.ArgumentParser:
     bn = sub.add_parser("bench", help="benchmarks and accuracy tables (docs/benchmarks.md, docs/accuracy.md)")
     bn.add_argument("--out", default="docs")
     bn.add_argument("--model", action="append", choices=list(REGISTRY),
-                    help="measure only this model again (repeatable) and replace its sections in the existing pages")
+                    help="measure only this model again (repeatable) and replace its sections in the existing pages "
+                         "(a model without a section there gets one at the end)")
     bn.add_argument("--samples", type=int, default=64)
     bn.add_argument("--resolution", type=int, default=64)
     bn.add_argument("--no-ms", action="store_true", help="leave out the multiple-scattering sections")
@@ -362,8 +363,8 @@ def cmd_bench(args) -> int:
     os.makedirs(out, exist_ok=True)
     try:
         bench.run(out, bench.Sizes(samples=args.samples, resolution=args.resolution, ms=ms), models=args.model)
-    except (ValueError, FileNotFoundError) as e:  # --model on pages without its marked section, or no pages
-        raise CliError(f"bench --model: {e}") from None
+    except FileNotFoundError as e:  # --model without the pages of a whole run
+        raise CliError(f"bench --model: {e.filename} does not exist: run the whole `make bench` first") from None
     return 0
 
 

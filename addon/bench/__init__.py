@@ -97,13 +97,14 @@ def marked(model_id: str, section: str) -> str:
 
 
 def splice(text: str, model_id: str, section: str, note: str) -> str:
-    """``text`` with the marked section of ``model_id`` replaced by ``section`` and ``note`` (refused when the page
-    has no such section: run the whole bench once)."""
+    """``text`` with the marked section of ``model_id`` replaced by ``section`` and ``note``; appended at the end when
+    the page has none yet (a model new since the last whole run)."""
     start, end = _markers(model_id)
+    body = marked(model_id, f"{section.strip(chr(10))}\n\n{note}")
     i, j = text.find(start), text.find(end)
     if i < 0 or j < i:
-        raise ValueError(f"the page has no marked {model_id} section: run the whole `make bench` first")
-    return text[:i] + marked(model_id, f"{section.strip(chr(10))}\n\n{note}").lstrip("\n") + text[j + len(end) + 1:]
+        return text.rstrip("\n") + "\n" + body
+    return text[:i] + body.lstrip("\n") + text[j + len(end) + 1:]
 
 
 def run(out_dir: str, sizes: Sizes = Sizes(), models: list[str] | None = None) -> None:

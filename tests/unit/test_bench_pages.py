@@ -1,7 +1,5 @@
 """The benchmark pages keep each model's sections between markers, so ``bench --model`` replaces one model's numbers
 without touching the others'."""
-import pytest
-
 from addon import bench
 
 
@@ -13,6 +11,8 @@ def test_splice_replaces_only_the_named_models_section():
     assert bench.splice(new, "a", "# A\nnewer", "*again*").count("<!-- lamina-bench a -->") == 1
 
 
-def test_splice_refuses_a_page_without_the_models_section():
-    with pytest.raises(ValueError, match="run the whole `make bench` first"):
-        bench.splice("# Accuracy\n", "a", "x", "note")
+def test_a_model_new_since_the_last_whole_run_is_appended():
+    page = "# Accuracy\n" + bench.marked("a", "# A\nold a")
+    new = bench.splice(page, "b", "# B\nnew b", "*alone*")
+    assert new.startswith(page.rstrip("\n")) and new.count("<!-- lamina-bench b -->") == 1
+    assert "new b" in new and "*alone*" in new and "old a" in new
