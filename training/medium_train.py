@@ -3,7 +3,8 @@ export them for ``addon.reference.neural_medium``.
 
 One network per table (``double``: order 2, ``multiple``: orders >= 3), as the paper: an MLP 6-50-50-1 with tanh,
 inputs (rho, z, theta, phi, albedo, g) in [0, 1] through ``neural_medium.encode`` (each cell paired with its centre
-in the encoded coordinates, each direction bin with its centre), target log(1 + Phi), L2 loss, Adam (learning rate
+in the encoded coordinates, each direction bin with its centre), target log(1 + Phi / PHI_0) (``neural_medium.target``:
+the paper's log(1 + Phi) with Phi in units of PHI_0 = 1e-12), L2 loss, Adam (learning rate
 0.01 for multiple and 0.001 for double scattering, the paper's, with cosine decay over the time budget), mini-
 batches of 30 000 samples reshuffled every epoch. 10 % of the samples are held out (the checkpoint with the lowest
 held-out loss is kept); whole materials can be held out too (``--hold-out``), for the off-grid check. Float32
@@ -50,11 +51,11 @@ def load_material(path: Path, kind: str) -> dict:
 
 
 def samples(material: dict) -> tuple[np.ndarray, np.ndarray]:
-    """(inputs (N, 6), targets log(1 + Phi) (N,)) of every cell and direction bin of a material's table."""
+    """(inputs (N, 6), targets log(1 + Phi / PHI_0) (N,)) of every cell and direction bin of a material's table."""
     rho_c, z_c = nm.cell_centres(material["rho_edges"], material["z_edges"])
     grid = np.meshgrid(rho_c, z_c, material["theta"], material["phi"], indexing="ij")
     x = nm.encode(*grid, material["alpha"], material["g"])
-    return x.astype(np.float32), np.log1p(np.maximum(material["table"], 0.0)).ravel().astype(np.float32)
+    return x.astype(np.float32), nm.target(material["table"]).ravel().astype(np.float32)
 
 
 def make_network(seed: int) -> torch.nn.Sequential:
@@ -141,7 +142,7 @@ def train_kind(kind: str, files: list[Path], held_out: set[str], minutes: float,
     x, y = np.concatenate(xs), np.concatenate(ys)
     net, info = fit(x, y, kind, minutes, seed, log)
     manifest = {"network": f"neural_medium {kind}", "activation": "tanh", "encoding": nm.ENCODING,
-                "target": "log(1 + Phi)", "layers": [6, *HIDDEN, 1],
+                "target": "log(1 + Phi / phi_0)", "phi_0": nm.PHI_0, "layers": [6, *HIDDEN, 1],
                 "data": {"materials": [m["name"] for m in training], "samples": int(len(x))},
                 "seed": seed, "minutes": minutes, **info,
                 "date": datetime.date.today().isoformat(), "code_version": code_version()}

@@ -2,7 +2,7 @@
 per-material table reconstruction (Sec. 3.7).
 
 Two networks, ``double`` and ``multiple``, each an MLP 6-50-50-1 with tanh (Sec. 3.5; ``bake.mlp``), predict
-log(1 + Phi) of the tables that ``training/medium_tracer.py`` defines: Phi(rho, z, theta, phi; albedo, g), the
+log(1 + Phi / PHI_0) of the tables that ``training/medium_tracer.py`` defines: Phi(rho, z, theta, phi; albedo, g), the
 radiance emitted per unit volume into direction (theta, phi) at the point (rho, z) by the double (order 2) or
 multiple (orders >= 3) scattering of a unit point-directional source along +z in an infinite medium, lengths in
 mean free paths (sigma_t = 1), directions in the point's local frame (theta from +z, phi from the radial direction,
@@ -28,6 +28,7 @@ WEIGHTS = Path(__file__).resolve().parents[1] / "bake" / "weights"
 ALBEDO_MAX = 0.999
 
 # Encoding version 1: the sinh map of the training grid (training.medium_tracer.sinh_edges) and its extents.
+PHI_0 = 1e-12  # the unit of Phi in the networks' target (``target``)
 ENCODING = {"version": 1, "scale": 1.0, "rho_max": 256.0, "z_max": 256.0, "albedo_max": ALBEDO_MAX}
 
 
@@ -57,10 +58,19 @@ def encode(rho, z, theta, phi, albedo, g, encoding: dict = ENCODING) -> np.ndarr
     return np.stack([c.ravel() for c in np.broadcast_arrays(*columns)], axis=1)
 
 
+def target(phi_values, phi_0: float = None) -> np.ndarray:
+    """What the networks learn: log(1 + Phi / PHI_0). The paper's log(1 + Phi) with Phi in units of PHI_0: in Lamina's
+    units (per unit source power, per mfp^3) Phi spans 1e-16 to 100 and mostly lies far below 1, where log(1 + Phi)
+    would be Phi itself and a network's absolute error a huge relative one (the energy of the far cells, whose volumes
+    reach 1e5 mfp^3, would be wrong by orders of magnitude)."""
+    return np.log1p(np.maximum(np.asarray(phi_values, dtype=np.float64), 0.0) / (PHI_0 if phi_0 is None else phi_0))
+
+
 def predict(net: mlp.MLP, rho, z, theta, phi, albedo, g) -> np.ndarray:
-    """Phi at the given points, directions and materials (flattened broadcast), non-negative."""
+    """Phi at the given points, directions and materials (flattened broadcast), non-negative (``target``'s inverse,
+    with the PHI_0 of the network's manifest)."""
     x = encode(rho, z, theta, phi, albedo, g, net.manifest.get("encoding", ENCODING))
-    return np.maximum(np.expm1(net(x)[:, 0]), 0.0)
+    return np.maximum(np.expm1(net(x)[:, 0]), 0.0) * net.manifest.get("phi_0", 1.0)
 
 
 def cell_centres(rho_edges, z_edges, encoding: dict = ENCODING) -> tuple[np.ndarray, np.ndarray]:

@@ -44,7 +44,8 @@ def test_the_weights_are_the_papers_size_and_say_how_they_were_made(trained):
         assert [w.shape for w in net.weights] == [(6, 50), (50, 50), (50, 1)]
         assert 4 * sum(w.size + b.size for w, b in zip(net.weights, net.biases)) <= 12 * 1024  # float32, 11.8 KB
         m = net.manifest
-        assert m["activation"] == "tanh" and m["encoding"] == nm.ENCODING and m["target"] == "log(1 + Phi)"
+        assert m["activation"] == "tanh" and m["encoding"] == nm.ENCODING and m["target"] == "log(1 + Phi / phi_0)"
+        assert m["phi_0"] == nm.PHI_0
         assert m["data"]["materials"] == ["a0.7000_g+0.000", "a0.7000_g+0.600", "a0.9500_g+0.000"]
         assert set(m["energy_ratio"]["held_out"]["per_material"]) == {"a0.9500_g+0.600"}
         assert all(math.isfinite(v) for v in m["energy_ratio"]["training"]["per_material"].values())
