@@ -56,7 +56,7 @@ def _numpy_shape(shape: str):
     return {"sphere": truth.Sphere(), "box": BOX}.get(shape)
 
 
-def _box_mesh(cuts: int = 23):
+def _box_mesh(cuts: int = 15):
     """The box with every face cut into a grid (the bake lives at vertices: large faces would interpolate it)."""
     bm = bmesh.new()
     try:
