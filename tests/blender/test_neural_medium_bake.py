@@ -170,14 +170,15 @@ def test_the_bake_operator_and_the_cli_use_the_shipped_networks(registered, tmp_
     c = np.array([tuple(v.vector) for v in ball.data.attributes[medium_nodes.ATTRIBUTES[0]].data])
     assert np.isfinite(c).all() and c.max() > 0.0
     assert medium_bake.bake_state(ball, bpy.context.scene)[0] == "baked"
-    source, out = tmp_path / "in.blend", tmp_path / "out.blend"
+    source, out, name = tmp_path / "in.blend", tmp_path / "out.blend", ball.name
     bpy.ops.wm.save_as_mainfile(filepath=str(source))
-    assert cli.main(["bake-medium", "--blend", str(source), "--object", ball.name, "--preset", "milk", "--scale",
+    assert cli.main(["bake-medium", "--blend", str(source), "--object", name, "--preset", "milk", "--scale",
                      "0.05", "--cells", "4", "--steps", "4", "--out", str(out)]) == 0
     bpy.ops.wm.open_mainfile(filepath=str(out))
-    baked = bpy.data.objects[ball.name]
+    baked = bpy.data.objects[name]
     assert medium_nodes.is_medium(baked.material_slots[0].material) and medium_nodes.has_bake(baked.data)
-    assert cli.main(["bake-medium", "--blend", str(source), "--object", ball.name, "--out", str(out)]) == 2  # exists
+    assert medium_nodes.current_params(baked.material_slots[0].material).g == pytest.approx(0.7)  # the milk
+    assert cli.main(["bake-medium", "--blend", str(source), "--object", name, "--out", str(out)]) == 2  # exists
 
 
 def test_compare_medium_writes_its_report_and_the_bake_closes_most_of_the_gap(tables, tmp_path, monkeypatch):
