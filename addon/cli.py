@@ -104,9 +104,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      "drive its layers) and save the .blend")
     bk.add_argument("--blend", required=True, help="the .blend to open")
     bk.add_argument("--material", required=True, help="the Lamina material to bake")
-    bk.add_argument("--out", help="the .blend to write (refused if it exists, see --overwrite)")
-    bk.add_argument("--overwrite", action="store_true",
-                    help="replace an existing --out; without --out, save over --blend")
+    _blend_output_args(bk)
 
     ad = sub.add_parser("add-porous", help="add a micrograin porous layer (dust, rust, ...) over a material of a "
                                            ".blend: a new material, assigned wherever the original was used")
@@ -116,9 +114,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--preset", help="a micrograin preset (list-presets --model micrograin); its bulk is ignored")
     g.add_argument("--json", help="a JSON file with a micrograin dict (its bulk is ignored)")
     ad.add_argument("--form", default="nodes", choices=FORMS)
-    ad.add_argument("--out", help="the .blend to write (refused if it exists, see --overwrite)")
-    ad.add_argument("--overwrite", action="store_true",
-                    help="replace an existing --out; without --out, save over --blend")
+    _blend_output_args(ad)
 
     bm = sub.add_parser("bake-medium", help="fill a closed mesh of a .blend with a neural medium (or keep the medium "
                                             "material it has), bake its double and multiple scattering from the "
@@ -131,9 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
     bm.add_argument("--scale", type=float, help="with --preset or --json: scene units per unit length")
     bm.add_argument("--cells", type=int, default=16, help="beams per lamp side (cells x cells per lamp)")
     bm.add_argument("--steps", type=int, default=12, help="quadrature points along each gathering ray")
-    bm.add_argument("--out", help="the .blend to write (refused if it exists, see --overwrite)")
-    bm.add_argument("--overwrite", action="store_true",
-                    help="replace an existing --out; without --out, save over --blend")
+    _blend_output_args(bm)
 
     cm = sub.add_parser("compare-medium", help="render a neural medium on the comparison sphere: Cycles single "
                                                "scattering, + Lamina's bake, full path tracing, against a numpy "
@@ -153,6 +147,13 @@ def build_parser() -> argparse.ArgumentParser:
                                                  "--overwrite)")
     cm.add_argument("--overwrite", action="store_true", help="replace the results in an existing --out")
     return ap
+
+
+def _blend_output_args(p) -> None:
+    """--out and --overwrite of a command that saves the .blend it opened (``_blend_paths``)."""
+    p.add_argument("--out", help="the .blend to write (refused if it exists, see --overwrite)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing --out; without --out, save over --blend")
 
 
 def _material_args(p) -> None:
