@@ -16,6 +16,7 @@ from .models import MODELS, REGISTRY
 from .models.params import ParamError
 from .nodes import FORMS, principled_models
 from .reference import truth_models
+from .reference.neural_medium_truth import COMPARE_SHAPES
 from .reference.scenes import KINDS
 
 SCENES = KINDS
@@ -136,7 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--preset", help="a neural_medium preset (list-presets --model neural_medium)")
     g.add_argument("--json", help="a JSON file with a neural_medium dict")
     cm.add_argument("--scale", type=float, help="scene units per unit length (the sphere has radius 1)")
-    cm.add_argument("--shape", default="sphere", choices=("sphere", "box", "torus"),
+    cm.add_argument("--shape", default="sphere", choices=COMPARE_SHAPES,
                     help="what the medium fills: the comparison sphere, a 1.6 x 1.6 x 0.5 box, a torus (no numpy "
                          "truth: measured against Cycles' full path tracing)")
     cm.add_argument("--samples", type=int, default=64, help="Cycles samples per pixel")

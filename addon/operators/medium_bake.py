@@ -28,6 +28,7 @@ from mathutils.bvhtree import BVHTree
 from ..bake import neural_medium as nb
 from ..nodes import neural_medium as medium_nodes
 from ..reference import neural_medium as nm
+from ..reference.scenes import Sun
 
 PROPERTY = "lamina_medium_bake"
 CHUNK = 256  # surface points per step of the modal bake
@@ -133,7 +134,6 @@ def scene_lamps(scene) -> tuple[list[dict], list[str]]:
 def lamp_beams(lamp: dict, shape, cells: int) -> nm.Beams:
     """A lamp's beams into ``shape`` (unit colour; ``channel_beams`` applies it)."""
     if lamp["type"] == "SUN":
-        from ..reference.scenes import Sun
         return nm.sun_beams(shape, Sun(tuple(-v for v in lamp["direction"]), lamp["energy"]), cells)
     try:
         beams = nm.point_beams(shape, lamp["position"], lamp["energy"] / (4.0 * math.pi), cells)

@@ -43,7 +43,7 @@ class Sizes:
     bake: nb.Settings = nb.Settings()
 
 
-SHAPES = ("sphere", "box", "torus")
+SHAPES = truth.COMPARE_SHAPES
 BOX = truth.Box((-0.8, -0.8, -0.25), (0.8, 0.8, 0.25))
 TORUS = (0.65, 0.3)  # major and minor radius
 
