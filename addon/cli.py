@@ -131,8 +131,9 @@ def build_parser() -> argparse.ArgumentParser:
     _blend_output_args(bm)
 
     cm = sub.add_parser("compare-medium", help="render a neural medium on the comparison sphere: Cycles single "
-                                               "scattering, + Lamina's bake, full path tracing, against a numpy "
-                                               "ground truth; write comparison.png and report.json")
+                                               "scattering, + Lamina's bake, full path tracing, random-walk "
+                                               "subsurface scattering, against a numpy ground truth; write "
+                                               "comparison.png and report.json")
     g = cm.add_mutually_exclusive_group(required=True)
     g.add_argument("--preset", help="a neural_medium preset (list-presets --model neural_medium)")
     g.add_argument("--json", help="a JSON file with a neural_medium dict")

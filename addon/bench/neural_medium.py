@@ -106,23 +106,31 @@ def accuracy(sizes) -> str:
                 "error wherever the camera is:", "",
             "| view tilted from +z towards +x (the sun's side) | mean | rel. RMSE |", "|---|---|---|"]
     out += [f"| {r['angle']:g}° | {r['mean']:+.1%} | {pct(r['rel_rmse'])} |" for r in view_fit_rows()]
-    out += ["", "Not measured yet: Cycles' random-walk subsurface scattering of the same medium.", ""]
+    notes = sorted({f"{r['label']}: {n}" for r in rows for n in r["subsurface_notes"]})
+    out += ["", "Cycles' random-walk subsurface scattering is a Principled BSDF set up to walk in the same medium "
+                "(`nodes/subsurface_np.py`: radius 1 / (σt (1 − g)), the Base Color whose Cycles remap is the "
+                "albedo, IOR 1, no specular layer). It differs from the volume by construction: light leaves "
+                "through a Lambertian closure where the walk exits, and enters where the camera's walk starts, "
+                "instead of crossing an index-matched boundary. What it could not match:", "",
+            *([f"- {n}" for n in notes] or ["- nothing"]), ""]
     return "\n".join(out)
 
 
 def speed(sizes) -> str:
-    from ..operators.medium_compare import BAKED, FULL, SINGLE
+    from ..operators.medium_compare import BAKED, FULL, SINGLE, SUBSURFACE
 
     rows = measure(sizes.samples)
     out = ["## Neural media (neural_medium)", "",
            f"Render times of the accuracy section's sphere ({sizes.samples} samples) and its bake, from the same "
            "run.", "",
-           "| medium | single scattering | + bake | ratio | full path tracing | full ÷ (single + bake) | table "
-           "reconstruction | bake: points, beams, time | points per second |", "|---|---|---|---|---|---|---|---|---|"]
+           "| medium | single scattering | + bake | ratio | full path tracing | full ÷ (single + bake) | random-walk SSS | "
+           "table reconstruction | bake: points, beams, time | points per second |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         f, b = r["forms"], r["bake"]
         single, baked, full = f[SINGLE]["seconds"], f[BAKED]["seconds"], f[FULL]["seconds"]
         out.append(f"| {r['label']}, {r['shape']} | {single:.2f} s | {baked:.2f} s | {baked / single:.2f}× | "
-                   f"{full:.2f} s | {full / baked:.1f}× | {b['tables_seconds']:.1f} s | {b['points']}, {b['beams']}, "
-                   f"{b['bake_seconds']:.1f} s | {b['points'] / b['bake_seconds']:.0f} |")
+                   f"{full:.2f} s | {full / baked:.1f}× | {f[SUBSURFACE]['seconds']:.2f} s | "
+                   f"{b['tables_seconds']:.1f} s | {b['points']}, {b['beams']}, {b['bake_seconds']:.1f} s | "
+                   f"{b['points'] / b['bake_seconds']:.0f} |")
     return "\n".join(out + [""])

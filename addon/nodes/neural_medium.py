@@ -22,6 +22,7 @@ import bpy
 from ..bake.neural_medium import COEFFICIENTS
 from ..models import neural_medium as model
 from .material import empty_material
+from .subsurface_np import subsurface_settings
 
 PROPERTY = "lamina_medium"
 GROUP = "Lamina Medium Bake"
@@ -188,3 +189,19 @@ def store(mesh, coefficients) -> None:
 
 def has_bake(mesh) -> bool:
     return all(name in mesh.attributes for name in ATTRIBUTES)
+
+
+def subsurface_material(p, name: str | None = None) -> bpy.types.Material:
+    """A new material rendering the medium ``p`` with Cycles' random-walk subsurface scattering instead of a volume
+    (a Principled BSDF, ``subsurface_np.subsurface_settings``): what an artist would reach for, compared beside the
+    bake. Its ``notes`` (what the random walk cannot match) are stored as the material's ``lamina_notes``."""
+    mat, tree, out = empty_material(name or f"{model.LABEL} subsurface")
+    sigma_s, sigma_a = p.per_scene_unit()
+    settings = subsurface_settings([s + a for s, a in zip(sigma_s, sigma_a)], p.albedo, p.g)
+    bsdf = tree.nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.subsurface_method = settings["method"]
+    for key, value in settings["inputs"].items():
+        bsdf.inputs[key].default_value = value
+    tree.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    mat["lamina_notes"] = json.dumps(settings["notes"])
+    return mat

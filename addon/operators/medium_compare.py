@@ -1,5 +1,6 @@
-"""Compare a neural medium (bpy): Cycles single scattering, single scattering + Lamina's bake, and Cycles' full
-volumetric path tracing, each with its render time and its error against Cycles' full path tracing (the external
+"""Compare a neural medium (bpy): Cycles single scattering, single scattering + Lamina's bake, Cycles' full
+volumetric path tracing, and Cycles' random-walk subsurface scattering of the same medium (a Principled BSDF,
+``nodes/subsurface_np.py``: what an artist would use instead of a volume), each with its render time and its error against Cycles' full path tracing (the external
 truth) and, for the shapes it renders (sphere, box), the numpy ground truth (``reference/neural_medium_truth.py``,
 all orders). Shapes: the comparison sphere, a box (a thick tile: thin parts at its edges) and a torus (closed, not
 convex). Shared by ``lamina compare-medium`` (pictures and report.json) and the bench. The user's scene is
@@ -32,6 +33,7 @@ from .cycles_render import render_cycles
 
 CACHE = Path(os.environ.get("LAMINA_CACHE", Path.home() / ".cache" / "lamina")) / "neural-medium-truth"
 SINGLE, BAKED, FULL = "single scattering", "single + Lamina bake", "Cycles full path tracing"
+SUBSURFACE = "Cycles random-walk SSS"
 
 
 @dataclass(frozen=True)
@@ -124,7 +126,7 @@ def _psnr(img, ref, mask) -> float:
 
 def compare_medium(p, sizes: Sizes = Sizes(), out_dir: str | None = None, label: str = "custom",
                    shape: str = "sphere") -> dict:
-    """The report (module docstring); with ``out_dir``, also ``comparison.png`` (the three Cycles images and the
+    """The report (module docstring); with ``out_dir``, also ``comparison.png`` (the four Cycles images and the
     truth, then each one's error map against the truth) and ``report.json`` there."""
     if shape not in SHAPES:
         raise ValueError(f"unknown shape {shape!r}; expected one of {', '.join(SHAPES)}")
@@ -149,11 +151,13 @@ def compare_medium(p, sizes: Sizes = Sizes(), out_dir: str | None = None, label:
     path = os.path.join(bpy.app.tempdir, "lamina_medium.exr")
     before = blend_io.snapshot()
     try:
-        mat = medium_nodes.new_material(p)
+        mat, sss = medium_nodes.new_material(p), medium_nodes.subsurface_material(p)
+        subsurface_notes = json.loads(sss["lamina_notes"])
         images = {SINGLE: render_cycles(mat, spec, sizes.samples, 0, path, prepare=plain),
                   BAKED: render_cycles(mat, spec, sizes.samples, 0, path, prepare=bake),
                   FULL: render_cycles(mat, spec, sizes.samples, 0, path, bounces=sizes.full_bounces,
-                                      prepare=plain)}
+                                      prepare=plain),
+                  SUBSURFACE: render_cycles(sss, spec, sizes.samples, 0, path, prepare=plain)}
     finally:
         blend_io.remove_new_data(before)
     full = images[FULL][0]
@@ -166,7 +170,7 @@ def compare_medium(p, sizes: Sizes = Sizes(), out_dir: str | None = None, label:
         truth_report = None
     report = {"label": label, "shape": shape, "params": p.to_dict(), "resolution": sizes.resolution,
               "samples": sizes.samples, "mean_free_paths_across": float(truth.optical_depth(p, 2.0).mean()),
-              "truth": truth_report, "bake": bake_info, "forms": {}}
+              "truth": truth_report, "bake": bake_info, "subsurface_notes": subsurface_notes, "forms": {}}
     for name, (img, seconds) in images.items():
         report["forms"][name] = {"seconds": seconds, "energy_error": float(img[mask].mean() / ref[mask].mean() - 1.0),
                                  "rel_rmse": float(metrics.rel_rmse(img, ref, mask)), "psnr": _psnr(img, ref, mask),
@@ -190,6 +194,7 @@ def summary_lines(report: dict) -> str:
         lines.append(f"  {name:28s} {f['seconds']:7.2f} s  energy {f['energy_error']:+.1%}  rel. RMSE "
                      f"{f['rel_rmse']:.1%}  vs full path tracing {f['rel_rmse_vs_full']:.1%}")
     b = report["bake"]
+    lines += [f"  {SUBSURFACE}: {note}" for note in report["subsurface_notes"]]
     lines.append(f"  bake: {b['points']} points, {b['beams']} beams, {b['bake_seconds']:.1f} s (tables "
                  f"{b['tables_seconds']:.1f} s)")
     return "\n".join(lines)

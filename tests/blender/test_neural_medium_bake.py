@@ -182,7 +182,7 @@ def test_the_bake_operator_and_the_cli_use_the_shipped_networks(registered, tmp_
 
 
 def test_compare_medium_writes_its_report_and_the_bake_closes_most_of_the_gap(tables, tmp_path, monkeypatch):
-    """The comparison (``lamina compare-medium``, the bench) on a small sphere: three Cycles forms against the numpy
+    """The comparison (``lamina compare-medium``, the bench) on a small sphere: four Cycles forms against the numpy
     truth, pictures and report.json; single scattering alone misses the orders >= 2 that the bake adds."""
     from addon.operators import medium_compare
 
@@ -192,7 +192,7 @@ def test_compare_medium_writes_its_report_and_the_bake_closes_most_of_the_gap(ta
                                  bake=nb.Settings(cells=8, steps=6))
     report = medium_compare.compare_medium(GREY, sizes, str(tmp_path), label="cloud")
     forms = report["forms"]
-    assert set(forms) == {medium_compare.SINGLE, medium_compare.BAKED, medium_compare.FULL}
+    assert set(forms) == {medium_compare.SINGLE, medium_compare.BAKED, medium_compare.FULL, medium_compare.SUBSURFACE}
     assert all(f["finite"] and f["min"] >= 0.0 for f in forms.values())
     assert forms[medium_compare.SINGLE]["energy_error"] < -0.2  # orders >= 2 are missing
     assert abs(forms[medium_compare.BAKED]["energy_error"]) < 0.5 * abs(forms[medium_compare.SINGLE]["energy_error"])
