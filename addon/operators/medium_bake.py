@@ -8,8 +8,10 @@ compares with the scene as it is now to say "stale". Linked duplicates share one
 says so. The mesh is taken before modifiers, in world space.
 
 Lamps. Suns (strength = irradiance), point and spot lamps (power P watts: radiant intensity P / (4 pi) W/sr, a spot
-masked by its cone, its blend ignored), each lamp's colour per channel; area lamps and the world are not baked
-(the operator says so). A beam whose way to its lamp is blocked by another object is dropped (``scene.ray_cast``):
+masked by its cone, its blend ignored), area lamps (square, rectangle, disk, ellipse: one-sided Lambertian, total
+power P, ``reference.neural_medium.area_beams``; a spread below 180 degrees is baked as 180, and the operator says
+so), each lamp's colour per channel (both conventions tested against Cycles); the world is not baked (the operator
+says so). A beam whose way to its lamp is blocked by another object is dropped (``scene.ray_cast``):
 other objects shadow the light; the object's own other parts do not (its medium attenuates the beam's light as the
 tables assume).
 """
@@ -19,7 +21,7 @@ import json
 import math
 import time
 
-import bpy  # noqa: F401, I001 - the bpy module must be imported before bmesh
+import bpy  # noqa: I001 - the bpy module must be imported before bmesh
 import bmesh
 import numpy as np
 from mathutils import Vector
@@ -32,7 +34,7 @@ from ..reference.scenes import Sun
 
 PROPERTY = "lamina_medium_bake"
 CHUNK = 256  # surface points per step of the modal bake
-BAKED_LAMPS = ("SUN", "POINT", "SPOT")
+BAKED_LAMPS = ("SUN", "POINT", "SPOT", "AREA")
 
 
 class BakeError(ValueError):
@@ -127,8 +129,40 @@ def scene_lamps(scene) -> tuple[list[dict], list[str]]:
                 "direction": [float(v) for v in (-(m.to_3x3() @ Vector((0.0, 0.0, 1.0)))).normalized()]}
         if light.type == "SPOT":
             lamp["spot_size"] = float(light.spot_size)
+        if light.type == "AREA":
+            lamp.update(_area_extent(light, m))
+            if getattr(light, "spread", math.pi) < math.pi - 1e-6:
+                notes.append(f"{ob.name}: the area lamp's spread is baked as 180 degrees")
         lamps.append(lamp)
+    if world_lights(scene.world):
+        notes.append(f"the world ({scene.world.name}) lights the object and is not baked")
     return lamps, notes
+
+
+def world_lights(world) -> bool:
+    """Whether ``world`` may light the scene: anything but none, a black colour, or a Background node whose unlinked
+    Color or Strength is 0."""
+    if world is None:
+        return False
+    tree = world.node_tree if bpy.app.version >= (5, 0, 0) or world.use_nodes else None  # 5.0: always nodes
+    if tree is None:
+        return max(world.color) > 0.0
+    out = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld" and n.is_active_output), None)
+    if out is None or not out.inputs["Surface"].is_linked:
+        return False
+    node = out.inputs["Surface"].links[0].from_node
+    if node.bl_idname != "ShaderNodeBackground" or any(i.is_linked for i in node.inputs):
+        return True
+    return node.inputs["Strength"].default_value > 0.0 and max(node.inputs["Color"].default_value[:3]) > 0.0
+
+
+def _area_extent(light, m) -> dict:
+    """An area lamp's half extents in world space (its object's scale included) and whether it is round."""
+    size_y = light.size_y if light.shape in ("RECTANGLE", "ELLIPSE") else light.size
+    axes = m.to_3x3()
+    return {"half_u": [float(v) for v in axes @ Vector((0.5 * light.size, 0.0, 0.0))],
+            "half_v": [float(v) for v in axes @ Vector((0.0, 0.5 * size_y, 0.0))],
+            "round": light.shape in ("DISK", "ELLIPSE")}
 
 
 def lamp_beams(lamp: dict, shape, cells: int) -> nm.Beams:
@@ -136,6 +170,9 @@ def lamp_beams(lamp: dict, shape, cells: int) -> nm.Beams:
     if lamp["type"] == "SUN":
         return nm.sun_beams(shape, Sun(tuple(-v for v in lamp["direction"]), lamp["energy"]), cells)
     try:
+        if lamp["type"] == "AREA":  # it emits along its local -z: the frame (half_v, half_u) has that normal
+            return nm.area_beams(shape, lamp["position"], lamp["half_v"], lamp["half_u"], lamp["energy"], cells,
+                                 lamp["round"])
         beams = nm.point_beams(shape, lamp["position"], lamp["energy"] / (4.0 * math.pi), cells)
     except ValueError:
         raise BakeError(f"the lamp {lamp['name']} is inside the object's bounds: move it outside") from None
@@ -219,7 +256,7 @@ def bake_steps(obj, scene, depsgraph, p, settings: nb.Settings, tables=None):
         raise BakeError(problem)
     lamps, notes = scene_lamps(scene)
     if not lamps:
-        raise BakeError("no sun, point or spot lamp lights the object: nothing to bake"
+        raise BakeError("no lamp lights the object: nothing to bake"
                         + (f" ({'; '.join(notes)})" if notes else ""))
     start = time.perf_counter()
     shape = MeshShape(obj)

@@ -111,15 +111,19 @@ def test_bad_input_is_refused_before_any_work():
     with pytest.raises(medium_bake.BakeError, match="not closed"):
         next(medium_bake.bake_steps(obj, scene, None, GREY, nb.Settings()))
     scene, obj = _scene_with(_sphere_mesh(), lamps=())
-    with pytest.raises(medium_bake.BakeError, match="no sun, point or spot lamp"):
+    scene.world = bpy.data.worlds.new("sky")
+    scene.world.color = (0.2, 0.3, 0.5)  # 4.2: a new world's nodes are off; 5.0: its Background node lights
+    with pytest.raises(medium_bake.BakeError, match=r"no lamp lights the object.*the world \(sky\) lights the "
+                                                    r"object and is not baked"):
         next(medium_bake.bake_steps(obj, scene, None, GREY, nb.Settings()))
     scene, obj = _scene_with(_sphere_mesh(), lamps=(("POINT", (0.0, 0.0, 0.2)),))
     scene.view_layers[0].update()
     with pytest.raises(medium_bake.BakeError, match="inside"):
         next(medium_bake.bake_steps(obj, scene, scene.view_layers[0].depsgraph, GREY, nb.Settings()))
-    scene, obj = _scene_with(_sphere_mesh(), lamps=(("AREA", (0.0, 0.0, 3.0)),))
-    with pytest.raises(medium_bake.BakeError, match="area lamps are not baked"):
-        next(medium_bake.bake_steps(obj, scene, None, GREY, nb.Settings()))
+    scene, obj = _scene_with(_sphere_mesh(), lamps=(("AREA", (0.0, 0.0, 0.9)),))  # inside the bounds
+    scene.view_layers[0].update()
+    with pytest.raises(medium_bake.BakeError, match="inside"):
+        next(medium_bake.bake_steps(obj, scene, scene.view_layers[0].depsgraph, GREY, nb.Settings()))
     assert medium_bake.mesh_problem(bpy.data.objects.new("empty", None)).startswith("select a mesh")
     assert not medium_nodes.has_bake(obj.data)  # nothing half-written
 
@@ -142,6 +146,23 @@ def test_the_bake_is_stored_per_mesh_and_goes_stale(tables):
     scene.view_layers[0].update()
     assert medium_bake.bake_state(obj, scene)[0] == "baked"
     mat.node_tree.nodes[medium_nodes.SCATTER].inputs["Anisotropy"].default_value = 0.5
+    assert medium_bake.bake_state(obj, scene)[0] == "stale"
+
+
+def test_an_area_lamp_is_baked_and_its_size_makes_the_bake_stale(tables):
+    """A square area lamp above the sphere: the bake has beams and light; resizing the lamp makes it stale.
+    (That a far area lamp lights the medium as a sun does: tests/unit/test_neural_medium_gather.py.)"""
+    scene, obj = _scene_with(_sphere_mesh(), lamps=(("AREA", (0.0, 0.0, 4.0)),))
+    obj.data.materials.append(medium_nodes.new_material(GREY))
+    lamp = next(o for o in scene.objects if o.type == "LIGHT")
+    lamp.data.energy, lamp.data.size = 500.0, 2.0
+    scene.view_layers[0].update()
+    result = medium_bake.run(obj, scene, scene.view_layers[0].depsgraph, GREY, nb.Settings(cells=4, steps=4),
+                             tables=tables)
+    c0 = result["coefficients"][:, 0, :]
+    assert result["record"]["beams"] > 0 and np.isfinite(c0).all() and c0.max() > 0.0
+    assert medium_bake.bake_state(obj, scene)[0] == "baked"
+    lamp.data.size = 1.0
     assert medium_bake.bake_state(obj, scene)[0] == "stale"
 
 
@@ -201,36 +222,50 @@ def test_compare_medium_writes_its_report_and_the_bake_closes_most_of_the_gap(ta
     assert len(list((tmp_path / "cache").glob("*.npz"))) == 1  # the truth, cached
 
 
-def test_a_point_lamp_of_power_p_has_the_intensity_the_bake_assumes(tmp_path):
-    """The bake's point and spot lamps radiate P / (4 pi) W/sr (``medium_bake.lamp_beams``): a white Lambertian top
-    of the sphere D below a point lamp of radius 0 shows (1 / pi) I / D^2."""
+@pytest.mark.parametrize("kind", ["POINT", "AREA"])
+def test_a_lamp_of_power_p_has_the_intensity_the_bake_assumes(kind, tmp_path):
+    """The bake's point and spot lamps radiate P / (4 pi) W/sr, its area lamps are one-sided Lambertian emitters of
+    total power P, radiance P / (pi A) (``medium_bake.lamp_beams``): a white Lambertian top of the sphere D below
+    the lamp shows (1 / pi) E, E the irradiance: I / D^2 for a point lamp of radius 0, and for a 2 x 2 square lamp
+    the integral of L cos cos / r^2 over it (midpoint rule)."""
     from addon.nodes.material import empty_material
 
     mat, tree, out = empty_material("white")
     diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
     diffuse.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
     tree.links.new(diffuse.outputs[0], out.inputs["Surface"])
-    power, distance = 1000.0, 3.0
+    power, distance, side = 1000.0, 6.0, 2.0
     lamps = []
 
-    def point_lamp(scene, obj):
+    def lamp(scene, obj):
         for o in scene.objects:
             if o.type == "LIGHT":
                 o.data.energy = 0.0
-        lamp = bpy.data.objects.new("point", bpy.data.lights.new("point", type="POINT"))
-        lamp.data.energy, lamp.data.shadow_soft_size = power, 0.0
-        lamp.location = (0.0, 0.0, 1.0 + distance)
-        scene.collection.objects.link(lamp)
-        lamps.append(lamp)
+        light = bpy.data.lights.new("lamp", type=kind)
+        light.energy = power
+        if kind == "POINT":
+            light.shadow_soft_size = 0.0
+        else:
+            light.shape, light.size = "SQUARE", side
+        ob = bpy.data.objects.new("lamp", light)
+        ob.location = (0.0, 0.0, 1.0 + distance)
+        scene.collection.objects.link(ob)
+        lamps.append(ob)
 
     spec = S.sphere_scene(resolution=24)
     try:
-        img, _ = render_cycles(mat, spec, 64, 0, str(tmp_path / "point.exr"), prepare=point_lamp)
+        img, _ = render_cycles(mat, spec, 256, 0, str(tmp_path / "lamp.exr"), prepare=lamp)
     finally:
-        for lamp in lamps:
-            data = lamp.data
-            bpy.data.objects.remove(lamp)
+        for ob in lamps:
+            data = ob.data
+            bpy.data.objects.remove(ob)
             bpy.data.lights.remove(data)
     centre = img[11:13, 11:13].mean(axis=(0, 1))
-    intensity = power / (4.0 * np.pi)
-    np.testing.assert_allclose(centre, intensity / (np.pi * distance ** 2), rtol=0.03)
+    if kind == "POINT":
+        irradiance = power / (4.0 * np.pi) / distance ** 2
+    else:
+        u = (np.arange(400) + 0.5) / 400 * side - 0.5 * side
+        x, y = np.meshgrid(u, u)
+        irradiance = power / (np.pi * side ** 2) * np.mean(distance ** 2 / (distance ** 2 + x * x + y * y) ** 2) \
+            * side ** 2
+    np.testing.assert_allclose(centre, irradiance / np.pi, rtol=0.02)

@@ -5,6 +5,8 @@ Double scattering happens near the beam, where the object's boundary matters lit
 truth's order 2. Multiple scattering travels further: the infinite-medium table also counts light that would
 have left the object, so the gather can only overestimate it (the method's approximation, Sec. 3.2; measured by
 training/medium_gather_check.py)."""
+import math
+
 import numpy as np
 import pytest
 
@@ -123,6 +125,30 @@ def test_a_far_point_light_is_a_sun(cloud):
     b = nm.gather(tables, CLOUD.mean_free_path[0], truth.Sphere(), point, origins, directions, steps=8)
     for kind in nm.KINDS:
         assert b[kind].sum() == pytest.approx(a[kind].sum(), rel=0.03)
+
+
+@pytest.mark.parametrize("round_", [False, True])
+def test_a_far_area_light_facing_the_object_is_a_sun(cloud, round_):
+    """A Lambertian area lamp of power P at distance D facing the sphere has intensity P / pi along its normal: with
+    P = pi E D^2 it lights the sphere as a sun of irradiance E (square and disc)."""
+    tables, _, _, _ = cloud
+    origins, directions = truth.camera_rays(SCENE, truth.Sphere())
+    sun = SCENE.suns[0]
+    distance, towards = 1e3, np.asarray(sun.direction)
+    u = nm._perpendicular(towards)
+    v = np.cross(towards, u)  # (u, v) emits along -towards, to the sphere
+    area = nm.area_beams(truth.Sphere(), distance * towards, 0.5 * v, 0.5 * u, math.pi * sun.irradiance * distance ** 2,
+                         16, round_)
+    assert area.powers.min() > 0.0
+    a = nm.gather(tables, CLOUD.mean_free_path[0], truth.Sphere(), _beams(SCENE.suns, 16), origins, directions, steps=8)
+    b = nm.gather(tables, CLOUD.mean_free_path[0], truth.Sphere(), area, origins, directions, steps=8)
+    for kind in nm.KINDS:
+        assert b[kind].sum() == pytest.approx(a[kind].sum(), rel=0.05)
+
+
+def test_an_area_light_facing_away_gives_nothing():
+    beams = nm.area_beams(truth.Sphere(), (0.0, 0.0, 3.0), (0.5, 0.0, 0.0), (0.0, 0.5, 0.0), 100.0, 16)  # emits +z
+    assert len(beams) == 0
 
 
 def test_a_point_light_inside_the_object_is_refused():
