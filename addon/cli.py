@@ -128,6 +128,8 @@ def build_parser() -> argparse.ArgumentParser:
     bm.add_argument("--scale", type=float, help="with --preset or --json: scene units per unit length")
     bm.add_argument("--cells", type=int, default=16, help="beams per lamp side (cells x cells per lamp)")
     bm.add_argument("--steps", type=int, default=12, help="quadrature points along each gathering ray")
+    bm.add_argument("--spacing", type=float, default=0.5, help="surface points closer than this many mean free "
+                                                               "paths share one gather (0: every vertex gathers)")
     _blend_output_args(bm)
 
     cm = sub.add_parser("compare-medium", help="render a neural medium on the comparison sphere: Cycles single "
@@ -444,7 +446,7 @@ def cmd_bake_medium(args) -> int:
 
     data = _medium_dict(args)
     try:
-        settings = nb.Settings(args.cells, args.steps)
+        settings = nb.Settings(args.cells, args.steps, spacing=args.spacing)
     except ValueError as e:
         raise CliError(str(e)) from None
     blend, out = _blend_paths(args)

@@ -38,17 +38,32 @@ COEFFICIENTS = ("c0", "cx", "cy", "cz")
 
 @dataclass(frozen=True)
 class Settings:
-    """Bake resolution: beams per lamp side (``cells`` x ``cells`` beams), quadrature points along each ray; and
+    """Bake resolution: beams per lamp side (``cells`` x ``cells`` beams), quadrature points along each ray;
     ``boundary``: multiple scattering with the boundary's image sources (``reference.neural_medium.gather``'s
-    ``images``), or the paper's infinite medium."""
+    ``images``), or the paper's infinite medium; ``spacing``: how close (in the medium's smallest mean free path)
+    surface points may be and share one gather (``gathering_points``, ``spread``; 0: every point gathers)."""
 
     cells: int = 16
     steps: int = 12
     boundary: bool = True
+    spacing: float = 0.5
 
     def __post_init__(self):
-        if not (1 <= self.cells <= 256 and 1 <= self.steps <= 256):
-            raise ValueError(f"bake settings out of range: cells {self.cells} (1-256), steps {self.steps} (1-256)")
+        if not (1 <= self.cells <= 256 and 1 <= self.steps <= 256 and 0.0 <= self.spacing <= 16.0):
+            raise ValueError(f"bake settings out of range: cells {self.cells} (1-256), steps {self.steps} (1-256), "
+                             f"spacing {self.spacing} (0-16 mean free paths)")
+
+    def key(self) -> list:
+        """What the bake key holds of the settings (a bake from before ``spacing`` existed gathered at every point
+        and keeps its key)."""
+        return [self.cells, self.steps, self.boundary] + ([self.spacing] if self.spacing else [])
+
+    def record(self) -> dict:
+        return {"cells": self.cells, "steps": self.steps, "boundary": self.boundary, "spacing": self.spacing}
+
+    @staticmethod
+    def from_record(record: dict) -> "Settings":
+        return Settings(**{"spacing": 0.0, **record})
 
 
 def reconstruction_grid(net) -> tuple:
@@ -131,6 +146,59 @@ def bake_points(p, tables: list[dict], shape, beams: list, points, normals, sett
     return out
 
 
+def gathering_spacing(p, settings: Settings) -> float:
+    """``settings.spacing`` in scene units: that many of the medium's smallest mean free paths."""
+    return settings.spacing * min(p.mean_free_path)
+
+
+def gathering_points(points, normals, spacing: float) -> np.ndarray:
+    """Indices of the points the bake gathers at when neighbours closer than ``spacing`` (scene units) may share
+    their light: one point per cell of a grid of that spacing and per side it faces (the axis and sign of the
+    largest component of its normal, so the two sides of a thin part never share), the one nearest the cell's
+    points' centroid. ``spacing`` <= 0: every point."""
+    points, normals = np.asarray(points, dtype=np.float64), np.asarray(normals, dtype=np.float64)
+    if spacing <= 0.0 or len(points) == 0:
+        return np.arange(len(points))
+    axis = np.argmax(np.abs(normals), axis=1)
+    side = 2 * axis + (normals[np.arange(len(normals)), axis] > 0.0)
+    keys = np.concatenate([np.floor(points / spacing).astype(np.int64), side[:, None]], axis=1)
+    _, group = np.unique(keys, axis=0, return_inverse=True)
+    group = group.ravel()
+    counts = np.bincount(group)
+    centroids = np.stack([np.bincount(group, points[:, k]) for k in range(3)], axis=1) / counts[:, None]
+    distance = np.linalg.norm(points - centroids[group], axis=1)
+    order = np.lexsort((distance, group))  # by group, nearest first
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = group[order][1:] != group[order][:-1]
+    return np.sort(order[first])
+
+
+def spread(coefficients, sources, source_normals, points, normals, spacing: float, neighbours: int = 4,
+           chunk: int = 2048) -> np.ndarray:
+    """Coefficients at every point from those gathered at ``sources``: the inverse-square-distance blend (softened
+    by a tenth of ``spacing``) of the ``neighbours`` nearest sources that face the same way (normals within 60
+    degrees; the nearest source if none does). A source point gets its own value back."""
+    sources, source_normals = np.asarray(sources, dtype=np.float64), np.asarray(source_normals, dtype=np.float64)
+    points, normals = np.asarray(points, dtype=np.float64), np.asarray(normals, dtype=np.float64)
+    k = min(neighbours, len(sources))
+    out = np.zeros((len(points),) + coefficients.shape[1:])
+    for start in range(0, len(points), chunk):
+        x, n = points[start:start + chunk], normals[start:start + chunk]
+        d2 = np.einsum("ik,ik->i", x, x)[:, None] - 2.0 * x @ sources.T + np.einsum("jk,jk->j", sources, sources)
+        d2 = np.maximum(d2, 0.0)
+        near = np.argpartition(d2, k - 1, axis=1)[:, :k] if k < len(sources) else np.tile(np.arange(k), (len(x), 1))
+        rows = np.arange(len(x))[:, None]
+        facing = np.einsum("ik,ijk->ij", n, source_normals[near]) > 0.5
+        nearest = d2[rows, near] == d2[rows, near].min(axis=1, keepdims=True)
+        use = np.where(facing.any(axis=1, keepdims=True), facing, nearest)
+        w = use / (d2[rows, near] + (0.1 * spacing) ** 2)
+        exact = d2[rows, near] <= (1e-6 * spacing) ** 2  # the source itself (up to the expansion's rounding)
+        w = np.where(exact.any(axis=1, keepdims=True), exact, w)
+        w /= w.sum(axis=1, keepdims=True)
+        out[start:start + chunk] = np.einsum("ij,ij...->i...", w, coefficients[near])
+    return out
+
+
 def _same_channel(p, beams: list, a: int, b: int) -> bool:
     return (p.albedo[a] == p.albedo[b] and p.mean_free_path[a] == p.mean_free_path[b]
             and np.array_equal(beams[a].powers, beams[b].powers))
@@ -141,7 +209,7 @@ def bake_key(params: dict, mesh_digest: str, lamps: list, settings: Settings, we
     networks' version, numbers to 5 significant digits (a value read back from a float32 socket is the same value).
     A changed key means the stored bake is stale."""
     key = json.dumps({"version": VERSION, "params": _rounded(params), "mesh": mesh_digest, "lamps": _rounded(lamps),
-                      "settings": [settings.cells, settings.steps, settings.boundary], "weights": weights},
+                      "settings": settings.key(), "weights": weights},
                      sort_keys=True)
     return hashlib.sha256(key.encode()).hexdigest()[:16]
 

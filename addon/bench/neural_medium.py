@@ -61,6 +61,56 @@ def view_fit_rows(views=(0.0, 45.0, 75.0), points: int = 400) -> list[dict]:
     return rows
 
 
+@lru_cache(maxsize=1)
+def spacing_rows(points: int = 3000, spacings=(0.25, 0.5, 1.0, 2.0), large: int = 100_000) -> list[dict]:
+    """The bake gathering at points ``spacing`` mean free paths apart and spreading to the rest
+    (``bake.neural_medium.gathering_points``, ``spread``) against gathering at every point: ``points`` on the unit
+    sphere (a Fibonacci lattice), the scene's sun, the networks' tables, the radiance along the normal; and the time
+    of a bake of ``large`` points at the default spacing. Grey media (the green channel's albedo)."""
+    import math
+    import time
+
+    import numpy as np
+
+    from ..bake import neural_medium as nb
+    from ..reference import neural_medium_truth as truth
+    from ..reference import scenes as S
+
+    def lattice(n):
+        i = np.arange(n) + 0.5
+        z = 1.0 - 2.0 * i / n
+        r, phi = np.sqrt(1.0 - z * z), math.pi * (1.0 + 5 ** 0.5) * i
+        return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+    def bake(p, tables, x, settings):
+        start = time.perf_counter()
+        h = nb.gathering_spacing(p, settings)
+        chosen = nb.gathering_points(x, x, h)
+        part = nb.bake_points(p, tables, truth.Sphere(), beams, x[chosen], x[chosen], settings)
+        return nb.spread(part, x[chosen], x[chosen], x, x, h), len(chosen), time.perf_counter() - start
+
+    beams = [nm.Beams.join([nm.sun_beams(truth.Sphere(), S.sphere_scene().suns[0], nb.Settings().cells)])] * 3
+    rows = []
+    for name, scale in (("cloud", 0.5), ("milk", 0.25)):
+        p = model.params_from_dict({**presets.load(MODEL, name), "scale": scale})
+        p = model.params_from_dict({**p.to_dict(), "sigma_s": [p.sigma_s[1]] * 3, "sigma_a": [p.sigma_a[1]] * 3})
+        tables, x = nb.channel_tables(p), lattice(points)
+        full, _, full_seconds = bake(p, tables, x, nb.Settings(spacing=0.0))
+        ref = nb.evaluate(full, x)[:, 1]
+        row = {"label": f"{name} ×{scale:g}", "mfp": p.mean_free_path[1], "points": points,
+               "seconds": full_seconds, "spacings": []}
+        for spacing in spacings:
+            out, gathered, seconds = bake(p, tables, x, nb.Settings(spacing=spacing))
+            got = nb.evaluate(out, x)[:, 1]
+            row["spacings"].append({"spacing": spacing, "gathered": gathered, "seconds": seconds,
+                                    "mean": float(got.mean() / ref.mean() - 1.0),
+                                    "rel_rmse": float(np.sqrt(np.mean((got - ref) ** 2)) / ref.mean())})
+        _, gathered, seconds = bake(p, tables, lattice(large), nb.Settings())
+        row["large"] = {"points": large, "gathered": gathered, "seconds": seconds, "beams": len(beams[1])}
+        rows.append(row)
+    return rows
+
+
 def network_lines() -> list[str]:
     lines = ["| network | float32 size | training materials, samples | minutes | energy ratio: training (mean, worst) "
              "| off the grid (mean, worst) |", "|---|---|---|---|---|---|"]
@@ -88,7 +138,8 @@ def accuracy(sizes) -> str:
            f"units), the numpy ground truth (`reference/neural_medium_truth.py`, {s.truth_paths} paths per pixel, all "
            "orders; its own noise in the last column). The torus (radii 0.65 and 0.3) has no numpy truth. The bake: "
            f"the networks' tables, {s.bake.cells} × {s.bake.cells} beams per lamp, {s.bake.steps} steps per ray, "
-           "multiple scattering with the boundary's image sources, linear in the direction per vertex. \"mfp\" is "
+           "multiple scattering with the boundary's image sources, gathered at points "
+           f"{s.bake.spacing:g} mean free paths apart, linear in the direction per vertex. \"mfp\" is "
            "the mean free paths per 2 scene units (the sphere's diameter).", "",
            "| medium (scale) | shape | mfp | form | energy vs Cycles full | rel. RMSE vs Cycles full | energy vs "
            "truth | rel. RMSE vs truth | PSNR vs truth | truth noise |", "|---|---|---|---|---|---|---|---|---|---|"]
@@ -106,6 +157,17 @@ def accuracy(sizes) -> str:
                 "error wherever the camera is:", "",
             "| view tilted from +z towards +x (the sun's side) | mean | rel. RMSE |", "|---|---|---|"]
     out += [f"| {r['angle']:g}° | {r['mean']:+.1%} | {pct(r['rel_rmse'])} |" for r in view_fit_rows()]
+    out += ["", "The bake gathers at surface points about half a mean free path apart (`bake-medium --spacing`, the "
+                "Bake dialog's Point spacing) and spreads their light to the other vertices (inverse-square "
+                "weights of the four nearest gathered points facing the same way). Against gathering at every "
+                "point (numpy, a 3000-point unit sphere, the sun, radiance along the normal):", "",
+            "| medium (scale) | mfp (units) | spacing (mfp) | points gathered | time | mean | rel. RMSE |",
+            "|---|---|---|---|---|---|---|"]
+    for r in spacing_rows():
+        out.append(f"| {r['label']} | {r['mfp']:.3f} | 0 (every point) | {r['points']} | {r['seconds']:.1f} s | "
+                   f"— | — |")
+        out += [f"| {r['label']} | {r['mfp']:.3f} | {step['spacing']:g} | {step['gathered']} | "
+                f"{step['seconds']:.1f} s | {step['mean']:+.1%} | {pct(step['rel_rmse'])} |" for step in r["spacings"]]
     notes = sorted({f"{r['label']}: {n}" for r in rows for n in r["subsurface_notes"]})
     out += ["", "Cycles' random-walk subsurface scattering is a Principled BSDF set up to walk in the same medium "
                 "(`nodes/subsurface_np.py`: radius 1 / (σt (1 − g)), the Base Color whose Cycles remap is the "
@@ -124,13 +186,21 @@ def speed(sizes) -> str:
            f"Render times of the accuracy section's sphere ({sizes.samples} samples) and its bake, from the same "
            "run.", "",
            "| medium | single scattering | + bake | ratio | full path tracing | full ÷ (single + bake) | random-walk SSS | "
-           "table reconstruction | bake: points, beams, time | points per second |",
+           "table reconstruction | bake: points (gathered), beams, time | points per second |",
            "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         f, b = r["forms"], r["bake"]
         single, baked, full = f[SINGLE]["seconds"], f[BAKED]["seconds"], f[FULL]["seconds"]
         out.append(f"| {r['label']}, {r['shape']} | {single:.2f} s | {baked:.2f} s | {baked / single:.2f}× | "
                    f"{full:.2f} s | {full / baked:.1f}× | {f[SUBSURFACE]['seconds']:.2f} s | "
-                   f"{b['tables_seconds']:.1f} s | {b['points']}, {b['beams']}, {b['bake_seconds']:.1f} s | "
+                   f"{b['tables_seconds']:.1f} s | {b['points']} ({b['gathered']}), {b['beams']}, "
+                   f"{b['bake_seconds']:.1f} s | "
                    f"{b['points'] / b['bake_seconds']:.0f} |")
+    out += ["", "A bake of 100 000 points (a unit sphere, the default half mean free path between gathering points, "
+                "one sun; numpy, without Blender):", "",
+            "| medium | points | gathered | beams | time | points per second |", "|---|---|---|---|---|---|"]
+    for r in spacing_rows():
+        g = r["large"]
+        out.append(f"| {r['label']} | {g['points']:,} | {g['gathered']:,} | {g['beams']} | {g['seconds']:.1f} s | "
+                   f"{g['points'] / g['seconds']:,.0f} |")
     return "\n".join(out + [""])

@@ -240,12 +240,14 @@ def bake_state(obj, scene) -> tuple[str, str]:
     info = json.loads(record)
     try:
         p = medium_nodes.current_params(mat)
-        key = current_key(obj, scene, p, nb.Settings(**info["settings"]))
+        key = current_key(obj, scene, p, nb.Settings.from_record(info["settings"]))
     except Exception as e:  # noqa: BLE001 - a hand-edited material or missing weights: say so
         return "unknown", f"Cannot check the bake: {e}"
     if key != info["key"]:
         return "stale", "Stale: a lamp, the mesh or the medium changed since the bake"
-    return "baked", f"Baked {info['points']} points from {info['beams']} beams in {info['seconds']:.1f} s"
+    gathered = info.get("gathered", info["points"])
+    return "baked", (f"Baked {info['points']} points ({gathered} gathered) from {info['beams']} beams in "
+                     f"{info['seconds']:.1f} s")
 
 
 def bake_steps(obj, scene, depsgraph, p, settings: nb.Settings, tables=None):
@@ -264,17 +266,21 @@ def bake_steps(obj, scene, depsgraph, p, settings: nb.Settings, tables=None):
     yield 0.0, "Reconstructing the medium's tables from the networks"
     tables = tables if tables is not None else nb.channel_tables(p)
     points, normals = surface_points(obj)
-    out = np.zeros((len(points), 4, 3))
-    for begin in range(0, len(points), CHUNK):
-        end = min(begin + CHUNK, len(points))
-        out[begin:end] = nb.bake_points(p, tables, shape, beams, points[begin:end], normals[begin:end], settings)
-        yield end / max(len(points), 1), f"Gathered {end} of {len(points)} points"
+    spacing = nb.gathering_spacing(p, settings)
+    chosen = nb.gathering_points(points, normals, spacing)
+    gathered = np.zeros((len(chosen), 4, 3))
+    for begin in range(0, len(chosen), CHUNK):
+        end = min(begin + CHUNK, len(chosen))
+        at = chosen[begin:end]
+        gathered[begin:end] = nb.bake_points(p, tables, shape, beams, points[at], normals[at], settings)
+        yield end / max(len(chosen), 1), f"Gathered {end} of {len(chosen)} points ({len(points)} vertices)"
+    out = nb.spread(gathered, points[chosen], normals[chosen], points, normals, spacing)
     key = nb.bake_key(p.to_dict(), nb.array_digest(points, normals), lamps, settings, weights_version())
     return {"coefficients": out, "notes": notes,
-            "record": {"key": key, "points": len(points), "beams": int(sum(len(b) for b in beams) // 3),
+            "record": {"key": key, "points": len(points), "gathered": len(chosen),
+                       "beams": int(sum(len(b) for b in beams) // 3),
                        "seconds": round(time.perf_counter() - start, 2), "version": nb.VERSION,
-                       "settings": {"cells": settings.cells, "steps": settings.steps,
-                                    "boundary": settings.boundary}}}
+                       "settings": settings.record()}}
 
 
 def apply(obj, result: dict) -> None:

@@ -146,6 +146,9 @@ class LAMINA_OT_bake_medium(bpy.types.Operator):
                                  description="Each lamp sends cells x cells virtual ray lights into the object")
     steps: bpy.props.IntProperty(name="Steps per ray", default=nb.Settings.steps, min=1, max=256,
                                  description="Quadrature points along each gathering ray")
+    spacing: bpy.props.FloatProperty(name="Point spacing (mfp)", default=nb.Settings.spacing, min=0.0, max=16.0,
+                                     description="Surface points closer than this many mean free paths share one "
+                                                 "gather (0: every vertex gathers; 0.5 costs 1-3% against that)")
 
     _timer = None
     _steps = None
@@ -163,7 +166,7 @@ class LAMINA_OT_bake_medium(bpy.types.Operator):
         self._object = obj.name  # the bake is applied to this object, wherever the selection goes meanwhile
         p = medium_nodes.current_params(medium_bake.medium_material(obj))
         self._steps = medium_bake.bake_steps(obj, context.scene, context.evaluated_depsgraph_get(), p,
-                                             nb.Settings(self.cells, self.steps))
+                                             nb.Settings(self.cells, self.steps, spacing=self.spacing))
 
     def execute(self, context):  # scripts and headless: the whole bake at once
         try:
@@ -262,7 +265,8 @@ def bake_medium_file(blend: str, object_name: str, data: dict | None, out: str,
     result = medium_bake.run(obj, scene, bpy.context.evaluated_depsgraph_get(), p, settings)
     blend_io.save_copy(out)
     r = result["record"]
-    return (f"baked {obj.name} ({mat.name}): {r['points']} points, {r['beams']} beams, {r['seconds']:.1f} s",
+    return (f"baked {obj.name} ({mat.name}): {r['points']} points ({r['gathered']} gathered), {r['beams']} beams, "
+            f"{r['seconds']:.1f} s",
             warnings + result["notes"])
 
 

@@ -74,6 +74,7 @@ def test_a_bake_of_the_sphere_renders_the_gather(tables, tmp_path):
     plain, _ = render_cycles(mat, SPHERE, 64, 0, str(tmp_path / "ss.exr"))
     baked, _ = render_cycles(mat, SPHERE, 64, 0, str(tmp_path / "ss_bake.exr"), prepare=bake)
     assert records and records[0]["points"] == 64 * 31 + 2 and records[0]["beams"] > 50
+    assert records[0]["gathered"] < 0.5 * records[0]["points"]  # half a mean free path apart
     origins, directions = truth.camera_rays(SPHERE, truth.Sphere())
     beams = nm.Beams.join(nm.sun_beams(truth.Sphere(), sun, 12) for sun in SPHERE.suns)
     g = nm.gather(tables[1], GREY.mean_free_path[1], truth.Sphere(), beams, origins, directions, steps=8,

@@ -202,3 +202,75 @@ def test_no_lamp_bakes_black(cloud):
     normals = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
     none = [nm.Beams.join([])] * 3
     assert np.all(nb.bake_points(CLOUD, [tables] * 3, truth.Sphere(), none, normals, normals) == 0.0)
+
+
+# ------------------------------------------------------------- gathering at fewer points (bake/neural_medium.py)
+
+def _fibonacci_sphere(n: int) -> np.ndarray:
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    r, phi = np.sqrt(1.0 - z * z), math.pi * (1.0 + 5 ** 0.5) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+def test_gathering_points_keep_one_point_per_cell_and_side():
+    from addon.bake import neural_medium as nb
+    points = _fibonacci_sphere(2000)
+    assert np.array_equal(nb.gathering_points(points, points, 0.0), np.arange(2000))
+    chosen = nb.gathering_points(points, points, 0.25)
+    assert 50 < len(chosen) < 1000 and len(np.unique(chosen)) == len(chosen)
+    # every point lies within a cell's diagonal of its nearest chosen point
+    d = np.linalg.norm(points[:, None, :] - points[chosen][None, :, :], axis=2).min(axis=1)
+    assert d.max() <= 0.25 * math.sqrt(3.0)
+    # the two faces of a sheet thinner than the spacing never share a point
+    top = np.array([[x, y, 0.01] for x in (0.1, 0.2) for y in (0.1, 0.2)])
+    sheet = np.concatenate([top, top * [1, 1, -1]])
+    normals = np.concatenate([np.tile([0.0, 0.0, 1.0], (4, 1)), np.tile([0.0, 0.0, -1.0], (4, 1))])
+    chosen = nb.gathering_points(sheet, normals, 1.0)
+    assert len(chosen) == 2 and set(normals[chosen, 2]) == {1.0, -1.0}
+
+
+def test_spread_returns_the_gathered_values_and_keeps_sides_apart():
+    from addon.bake import neural_medium as nb
+    points = _fibonacci_sphere(1500)
+    chosen = nb.gathering_points(points, points, 0.3)
+    field = np.stack([np.ones(len(points)), points[:, 0], points[:, 1], points[:, 2]], axis=1)[:, :, None] * [1, 2, 3]
+    out = nb.spread(field[chosen], points[chosen], points[chosen], points, points, 0.3)
+    np.testing.assert_allclose(out[chosen], field[chosen], rtol=1e-12)  # a gathered point keeps its value
+    np.testing.assert_allclose(out[:, 0], field[:, 0], rtol=1e-12)  # a constant stays constant
+    assert np.abs(out[:, 1:] - field[:, 1:]).max() < 0.3 * 3  # a linear field moves by less than the spacing
+    # a sheet: the bottom face gets the bottom's value, never the top's
+    sources = np.array([[0.0, 0.0, 0.01], [0.0, 0.0, -0.01]])
+    normals = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    values = np.array([[[1.0]], [[2.0]]])
+    got = nb.spread(values, sources, normals, np.array([[0.05, 0.0, -0.01]]), normals[1:], 1.0)
+    assert got[0, 0, 0] == 2.0
+
+
+def test_a_bake_at_fewer_points_stays_close_to_gathering_at_every_point(cloud):
+    """Half a mean free path between gathering points (the default) against every point: within 3% relative RMSE
+    on the cloud's sphere (the bench measures other spacings and media)."""
+    from addon.bake import neural_medium as nb
+    tables, _, _, _ = cloud
+    p = model.params_from_dict({**CLOUD.to_dict(), "sigma_s": [CLOUD.sigma_s[0]] * 3,
+                                "sigma_a": [CLOUD.sigma_a[0]] * 3})
+    points = _fibonacci_sphere(600)
+    beams = [_beams(SCENE.suns, 16)] * 3
+    settings = nb.Settings(cells=16, steps=6)
+    full = nb.evaluate(nb.bake_points(p, [tables] * 3, truth.Sphere(), beams, points, points, settings), points)
+    spacing = nb.gathering_spacing(p, settings)
+    chosen = nb.gathering_points(points, points, spacing)
+    assert len(chosen) < 0.5 * len(points)
+    part = nb.bake_points(p, [tables] * 3, truth.Sphere(), beams, points[chosen], points[chosen], settings)
+    got = nb.evaluate(nb.spread(part, points[chosen], points[chosen], points, points, spacing), points)
+    assert np.sqrt(np.mean((got - full) ** 2)) < 0.03 * full.mean()
+
+
+def test_a_bake_from_before_the_spacing_keeps_its_key():
+    from addon.bake import neural_medium as nb
+    old = nb.Settings.from_record({"cells": 16, "steps": 12, "boundary": True})
+    assert old.spacing == 0.0 and old.key() == [16, 12, True]
+    assert nb.Settings().key() == [16, 12, True, 0.5]
+    assert nb.Settings.from_record(nb.Settings().record()) == nb.Settings()
+    with pytest.raises(ValueError, match="spacing"):
+        nb.Settings(spacing=float("nan"))
