@@ -187,13 +187,13 @@ def spread(coefficients, sources, source_normals, points, normals, spacing: floa
         d2 = np.einsum("ik,ik->i", x, x)[:, None] - 2.0 * x @ sources.T + np.einsum("jk,jk->j", sources, sources)
         d2 = np.maximum(d2, 0.0)
         near = np.argpartition(d2, k - 1, axis=1)[:, :k] if k < len(sources) else np.tile(np.arange(k), (len(x), 1))
-        rows = np.arange(len(x))[:, None]
+        d2 = np.sum((x[:, None, :] - sources[near]) ** 2, axis=2)  # exact (0 for a source itself)
         facing = np.einsum("ik,ijk->ij", n, source_normals[near]) > 0.5
-        nearest = d2[rows, near] == d2[rows, near].min(axis=1, keepdims=True)
+        nearest = d2 == d2.min(axis=1, keepdims=True)
         use = np.where(facing.any(axis=1, keepdims=True), facing, nearest)
-        w = use / (d2[rows, near] + (0.1 * spacing) ** 2)
-        exact = d2[rows, near] <= (1e-6 * spacing) ** 2  # the source itself (up to the expansion's rounding)
-        w = np.where(exact.any(axis=1, keepdims=True), exact, w)
+        exact = d2 == 0.0
+        with np.errstate(divide="ignore"):
+            w = np.where(exact.any(axis=1, keepdims=True), exact, use / (d2 + (0.1 * spacing) ** 2))
         w /= w.sum(axis=1, keepdims=True)
         out[start:start + chunk] = np.einsum("ij,ij...->i...", w, coefficients[near])
     return out

@@ -17,11 +17,14 @@ CASES = (("cloud", 0.5, "sphere"), ("candle", 0.1, "sphere"), ("milk", 0.25, "sp
          ("cloud", 0.5, "box"), ("milk", 0.25, "box"), ("milk", 0.25, "torus"))
 
 
+EQUAL_ERROR_SAMPLES = 4096  # the most samples Cycles' full path tracing gets to reach the bake's error
+
+
 @lru_cache(maxsize=2)
 def measure(samples: int) -> list[dict]:
     from ..operators import medium_compare
 
-    sizes = medium_compare.Sizes(samples=samples)
+    sizes = medium_compare.Sizes(samples=samples, equal_error_samples=EQUAL_ERROR_SAMPLES)
     return [medium_compare.compare_medium(model.params_from_dict({**presets.load(MODEL, name), "scale": scale}),
                                           sizes, label=f"{name} ×{scale:g}", shape=shape)
             for name, scale, shape in CASES]
@@ -196,6 +199,19 @@ def speed(sizes) -> str:
                    f"{b['tables_seconds']:.1f} s | {b['points']} ({b['gathered']}), {b['beams']}, "
                    f"{b['bake_seconds']:.1f} s | "
                    f"{b['points'] / b['bake_seconds']:.0f} |")
+    out += ["", "Cycles' full path tracing at more samples (doubling, up to "
+                f"{EQUAL_ERROR_SAMPLES}) until its relative RMSE against the numpy truth is at most the bake's (the "
+                "truth's own noise is part of both):", "",
+            "| medium | single + bake: rel. RMSE, time | full path tracing: samples, rel. RMSE, time | full ÷ "
+            "(single + bake) at equal error |", "|---|---|---|---|"]
+    for r in rows:
+        e = r["full_at_bake_error"]
+        if e is None:
+            continue
+        baked = r["forms"][BAKED]["seconds"]
+        reached = "" if e["reached"] else f" (not reached at {e['samples']})"
+        out.append(f"| {r['label']}, {r['shape']} | {pct(e['target'])}, {baked:.2f} s | {e['samples']}, "
+                   f"{pct(e['rel_rmse'])}, {e['seconds']:.2f} s{reached} | {e['seconds'] / baked:.1f}× |")
     out += ["", "A bake of 100 000 points (a unit sphere, the default half mean free path between gathering points, "
                 "one sun; numpy, without Blender):", "",
             "| medium | points | gathered | beams | time | points per second |", "|---|---|---|---|---|---|"]

@@ -43,6 +43,7 @@ class Sizes:
     truth_paths: int = 1024
     full_bounces: int = 1024
     bake: nb.Settings = nb.Settings()
+    equal_error_samples: int = 0  # > 0: also find the samples Cycles' full path tracing needs for the bake's error
 
 
 SHAPES = truth.COMPARE_SHAPES
@@ -124,6 +125,20 @@ def _psnr(img, ref, mask) -> float:
     return 20.0 * math.log10(peak / math.sqrt(mse)) if mse > 0 and peak > 0 else math.inf
 
 
+def _full_at_error(mat, spec, sizes: Sizes, path: str, prepare, ref, mask, target: float) -> dict:
+    """Cycles' full path tracing at twice, four times, ... ``sizes.samples`` (up to ``equal_error_samples``) until
+    its relative RMSE against the truth is at most ``target`` (the bake's): the samples, the time and the error of
+    the first that is (``reached`` False if none up to the cap)."""
+    samples = sizes.samples
+    while True:
+        samples *= 2
+        img, seconds = render_cycles(mat, spec, samples, 0, path, bounces=sizes.full_bounces, prepare=prepare)
+        error = float(metrics.rel_rmse(img, ref, mask))
+        if error <= target or 2 * samples > sizes.equal_error_samples:
+            return {"samples": samples, "seconds": seconds, "rel_rmse": error, "target": target,
+                    "reached": error <= target}
+
+
 def compare_medium(p, sizes: Sizes = Sizes(), out_dir: str | None = None, label: str = "custom",
                    shape: str = "sphere") -> dict:
     """The report (module docstring); with ``out_dir``, also ``comparison.png`` (the four Cycles images and the
@@ -150,6 +165,7 @@ def compare_medium(p, sizes: Sizes = Sizes(), out_dir: str | None = None, label:
 
     path = os.path.join(bpy.app.tempdir, "lamina_medium.exr")
     before = blend_io.snapshot()
+    equal_error = None
     try:
         mat, sss = medium_nodes.new_material(p), medium_nodes.subsurface_material(p)
         subsurface_notes = json.loads(sss["lamina_notes"])
@@ -158,19 +174,23 @@ def compare_medium(p, sizes: Sizes = Sizes(), out_dir: str | None = None, label:
                   FULL: render_cycles(mat, spec, sizes.samples, 0, path, bounces=sizes.full_bounces,
                                       prepare=plain),
                   SUBSURFACE: render_cycles(sss, spec, sizes.samples, 0, path, prepare=plain)}
+        full = images[FULL][0]
+        if t is not None:
+            ref, mask = t["total"], t["mask"].astype(bool) & (S.scene_mask(spec) if shape == "sphere" else True)
+            truth_report = {"paths": sizes.truth_paths,
+                            "relative_noise": float(np.sqrt(np.mean(t["noise"][mask] ** 2)) / ref[mask].mean())}
+            if sizes.equal_error_samples:
+                target = float(metrics.rel_rmse(images[BAKED][0], ref, mask))
+                equal_error = _full_at_error(mat, spec, sizes, path, plain, ref, mask, target)
+        else:  # no numpy truth for this shape: Cycles' full path tracing is the truth
+            ref, mask = full, np.max(images[SINGLE][0], axis=-1) > 0.0
+            truth_report = None
     finally:
         blend_io.remove_new_data(before)
-    full = images[FULL][0]
-    if t is not None:
-        ref, mask = t["total"], t["mask"].astype(bool) & (S.scene_mask(spec) if shape == "sphere" else True)
-        truth_report = {"paths": sizes.truth_paths,
-                        "relative_noise": float(np.sqrt(np.mean(t["noise"][mask] ** 2)) / ref[mask].mean())}
-    else:  # no numpy truth for this shape: Cycles' full path tracing is the truth
-        ref, mask = full, np.max(images[SINGLE][0], axis=-1) > 0.0
-        truth_report = None
     report = {"label": label, "shape": shape, "params": p.to_dict(), "resolution": sizes.resolution,
               "samples": sizes.samples, "mean_free_paths_across": float(truth.optical_depth(p, 2.0).mean()),
-              "truth": truth_report, "bake": bake_info, "subsurface_notes": subsurface_notes, "forms": {}}
+              "truth": truth_report, "bake": bake_info, "subsurface_notes": subsurface_notes,
+              "full_at_bake_error": equal_error, "forms": {}}
     for name, (img, seconds) in images.items():
         report["forms"][name] = {"seconds": seconds, "energy_error": float(img[mask].mean() / ref[mask].mean() - 1.0),
                                  "rel_rmse": float(metrics.rel_rmse(img, ref, mask)), "psnr": _psnr(img, ref, mask),
@@ -195,6 +215,10 @@ def summary_lines(report: dict) -> str:
                      f"{f['rel_rmse']:.1%}  vs full path tracing {f['rel_rmse_vs_full']:.1%}")
     b = report["bake"]
     lines += [f"  {SUBSURFACE}: {note}" for note in report["subsurface_notes"]]
+    equal = report.get("full_at_bake_error")
+    if equal is not None:
+        lines.append(f"  full path tracing at {equal['samples']} samples: rel. RMSE {equal['rel_rmse']:.1%} "
+                     f"(the bake's {equal['target']:.1%}) in {equal['seconds']:.2f} s")
     lines.append(f"  bake: {b['points']} points, {b['beams']} beams, {b['bake_seconds']:.1f} s (tables "
                  f"{b['tables_seconds']:.1f} s)")
     return "\n".join(lines)

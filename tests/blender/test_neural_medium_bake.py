@@ -211,7 +211,7 @@ def test_compare_medium_writes_its_report_and_the_bake_closes_most_of_the_gap(ta
     monkeypatch.setattr(medium_compare, "CACHE", tmp_path / "cache")
     monkeypatch.setattr(nb, "channel_tables", lambda p: tables)
     sizes = medium_compare.Sizes(samples=16, resolution=16, truth_paths=128, full_bounces=256,
-                                 bake=nb.Settings(cells=8, steps=6))
+                                 bake=nb.Settings(cells=8, steps=6), equal_error_samples=64)
     report = medium_compare.compare_medium(GREY, sizes, str(tmp_path), label="cloud")
     forms = report["forms"]
     assert set(forms) == {medium_compare.SINGLE, medium_compare.BAKED, medium_compare.FULL, medium_compare.SUBSURFACE}
@@ -221,6 +221,9 @@ def test_compare_medium_writes_its_report_and_the_bake_closes_most_of_the_gap(ta
     assert abs(forms[medium_compare.FULL]["energy_error"]) < 0.1  # Cycles' own path tracing agrees with the truth
     assert (tmp_path / "comparison.png").exists() and json.loads((tmp_path / "report.json").read_text())["bake"]
     assert len(list((tmp_path / "cache").glob("*.npz"))) == 1  # the truth, cached
+    equal = report["full_at_bake_error"]  # full path tracing at 32, then 64 samples until the bake's error
+    assert equal["samples"] in (32, 64) and equal["target"] == pytest.approx(forms[medium_compare.BAKED]["rel_rmse"])
+    assert equal["reached"] == (equal["rel_rmse"] <= equal["target"]) and (equal["reached"] or equal["samples"] == 64)
 
 
 @pytest.mark.parametrize("kind", ["POINT", "AREA"])
