@@ -58,15 +58,6 @@ def samples(material: dict) -> tuple[np.ndarray, np.ndarray]:
     return x.astype(np.float32), nm.target(material["table"]).ravel().astype(np.float32)
 
 
-def energy_shares(material: dict) -> np.ndarray:
-    """Each sample's share of the power of its material's table (``samples``' order; sums to 1)."""
-    r, z = np.asarray(material["rho_edges"]), np.asarray(material["z_edges"])
-    volumes = np.pi * np.outer(np.diff(r * r), np.diff(z))
-    table = material["table"]
-    power = table * volumes[:, :, None, None] * nm.bin_solid_angles(*table.shape[2:])[None, None]
-    return (power / max(power.sum(), 1e-300)).ravel()
-
-
 def make_network(seed: int) -> torch.nn.Sequential:
     torch.manual_seed(seed)
     sizes = (6, *HIDDEN, 1)
@@ -84,21 +75,12 @@ def to_mlp(net: torch.nn.Sequential, manifest: dict) -> mlp.MLP:
                    tuple(m.bias.detach().numpy().astype(np.float64) for m in linears), manifest)
 
 
-def fit(x: np.ndarray, y: np.ndarray, kind: str, minutes: float, seed: int, log=print, share=None,
-        energy_share: float = 0.0) -> tuple:
-    """Train on (x, y) for about ``minutes``; returns (network with the best held-out loss, info). With
-    ``energy_share`` > 0, each epoch draws its samples (with replacement) with probability (1 - e) / N + e x
-    ``share`` / materials: that fraction of the draws goes where the tables' power is (``share``: each sample's share
-    of its material's power), the rest uniformly; the held-out loss stays uniform."""
+def fit(x: np.ndarray, y: np.ndarray, kind: str, minutes: float, seed: int, log=print) -> tuple:
+    """Train on (x, y) for about ``minutes``; returns (network with the best held-out loss, info)."""
     rng = np.random.default_rng(seed)
     order = rng.permutation(len(x))
     n_val = max(1, int(VALIDATION_SHARE * len(x)))
     val, train = order[:n_val], order[n_val:]
-    draw = None
-    if energy_share > 0.0:
-        materials = float(share.sum())
-        draw = (1.0 - energy_share) / len(x) + energy_share * share[train] / materials
-        draw = np.cumsum(draw / draw.sum())
     xt, yt = torch.from_numpy(x[train]), torch.from_numpy(y[train])
     xv, yv = torch.from_numpy(x[val]), torch.from_numpy(y[val])
     net = make_network(seed)
@@ -108,10 +90,7 @@ def fit(x: np.ndarray, y: np.ndarray, kind: str, minutes: float, seed: int, log=
     epoch = 0
     generator = torch.Generator().manual_seed(seed)
     while True:
-        if draw is None:
-            perm = torch.randperm(len(xt), generator=generator)
-        else:
-            perm = torch.from_numpy(np.minimum(np.searchsorted(draw, rng.random(len(xt))), len(xt) - 1))
+        perm = torch.randperm(len(xt), generator=generator)
         for s in range(0, len(xt), BATCH):
             frac = min((time.perf_counter() - start) / budget, 1.0)
             for group in opt.param_groups:
@@ -132,7 +111,7 @@ def fit(x: np.ndarray, y: np.ndarray, kind: str, minutes: float, seed: int, log=
     net.load_state_dict(best[1])
     with torch.no_grad():
         train_loss = float(torch.mean((net(xt)[:, 0] - yt) ** 2))
-    return net, {"epochs": epoch, "train_l2": train_loss, "held_out_l2": best[0], "energy_share": energy_share,
+    return net, {"epochs": epoch, "train_l2": train_loss, "held_out_l2": best[0],
                  "seconds": round(time.perf_counter() - start, 1)}
 
 
@@ -153,7 +132,7 @@ def summary(ratios: dict) -> dict:
 
 
 def train_kind(kind: str, files: list[Path], held_out: set[str], minutes: float, seed: int, out: Path,
-               log=print, off_grid: list[Path] = (), energy_share: float = 0.0) -> dict:
+               log=print, off_grid: list[Path] = ()) -> dict:
     """Train, evaluate and export the ``kind`` network; returns its manifest."""
     materials = [load_material(p, kind) for p in files]
     training = [m for m in materials if m["name"] not in held_out]
@@ -161,8 +140,7 @@ def train_kind(kind: str, files: list[Path], held_out: set[str], minutes: float,
         raise SystemExit("no training materials left after --hold-out")
     xs, ys = zip(*(samples(m) for m in training))
     x, y = np.concatenate(xs), np.concatenate(ys)
-    share = np.concatenate([energy_shares(m) for m in training]) if energy_share > 0.0 else None
-    net, info = fit(x, y, kind, minutes, seed, log, share, energy_share)
+    net, info = fit(x, y, kind, minutes, seed, log)
     manifest = {"network": f"neural_medium {kind}", "activation": "tanh", "encoding": nm.ENCODING,
                 "target": "log(1 + Phi / phi_0)", "phi_0": nm.PHI_0, "layers": [6, *HIDDEN, 1],
                 "data": {"materials": [m["name"] for m in training], "samples": int(len(x))},
@@ -195,9 +173,6 @@ def main(argv=None) -> int:
     ap.add_argument("--off-grid", type=Path, help="a dataset folder of materials between the grid's (albedo, g), "
                                                   "only evaluated (the manifest's off_grid energy ratios)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--energy-share", type=float, default=0.0,
-                    help="fraction of each epoch's samples drawn by their share of the table's power (0: uniform, "
-                         "the paper's)")
     ap.add_argument("--quick", action="store_true", help="a few seconds per network, for tests")
     a = ap.parse_args(argv)
     files = sorted(a.data.glob("a*_g*.npz"))
@@ -211,8 +186,7 @@ def main(argv=None) -> int:
     if a.off_grid and not off_grid:
         raise SystemExit(f"--off-grid: no dataset files in {a.off_grid}")
     for kind in a.kinds:
-        train_kind(kind, files, set(a.hold_out), 0.05 if a.quick else a.minutes, a.seed, a.out, off_grid=off_grid,
-                   energy_share=a.energy_share)
+        train_kind(kind, files, set(a.hold_out), 0.05 if a.quick else a.minutes, a.seed, a.out, off_grid=off_grid)
     return 0
 
 
