@@ -138,7 +138,7 @@ def bake_points(p, tables: list[dict], shape, beams: list, points, normals, sett
             if progress is not None:
                 progress((c + done / max(total, 1)) / 3.0)
 
-        images = nm.extrapolation_distance(p.albedo[c], p.g) if settings.boundary else None
+        images = nm.boundary(p.albedo[c], p.g) if settings.boundary else None
         radiance = nm.gather(tables[c], p.mean_free_path[c], shape, beams[c], origins, inward, steps=settings.steps,
                              progress=report, images=images)
         values = sum(radiance[kind] for kind in nm.KINDS).reshape(len(points), DIRECTIONS)

@@ -57,7 +57,7 @@ def view_fit_rows(views=(0.0, 45.0, 75.0), points: int = 400) -> list[dict]:
                             np.tile(view, (len(n), 1)))[:, 1]
         g = nm.gather(tables[1], p.mean_free_path[1], truth.Sphere(), beams[1], n + 1e-4 * view,
                       np.tile(-view, (len(n), 1)), steps=settings.steps,
-                      images=nm.extrapolation_distance(p.albedo[1], p.g))
+                      images=nm.boundary(p.albedo[1], p.g))
         direct = g["double"] + g["multiple"]
         rows.append({"angle": angle, "mean": float(baked.mean() / direct.mean() - 1.0),
                      "rel_rmse": float(np.sqrt(np.mean((baked - direct) ** 2)) / direct.mean())})

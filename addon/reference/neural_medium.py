@@ -15,6 +15,7 @@ above ALBEDO_MAX are taken at ALBEDO_MAX: the networks never saw them) and (g + 
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -280,6 +281,23 @@ def extrapolation_distance(albedo: float, g: float) -> float:
     return 2.0 / (3.0 * max(1.0 - float(albedo) * float(g), 1e-6))
 
 
+@dataclass(frozen=True)
+class Boundary:
+    """The boundary's image sources for ``gather``: the extrapolation distance ``zb`` in mfp and the weight
+    ``exits`` of the images across the planes where the beam and the camera ray leave the object."""
+
+    zb: float
+    exits: float
+
+
+def boundary(albedo: float, g: float) -> Boundary:
+    """The image sources of a medium: z_b = ``extrapolation_distance``, and the exit planes' images weighted
+    min(1, 1 - g). The weight is a calibration (``python -m training.medium_gather_check --exits``, docs/training.md):
+    with weight 1 the exit images bring an isotropic cloud in a thin box from +79% to +3% but take 40% too much
+    from forward-scattering milk, whose mirrored beam points its forward lobe back into the object."""
+    return Boundary(extrapolation_distance(albedo, g), min(1.0, 1.0 - float(g)))
+
+
 def _perpendicular(d: np.ndarray) -> np.ndarray:
     """A unit vector perpendicular to each unit row of d (..., 3)."""
     helper = np.where(np.abs(d[..., 2:3]) < 0.9, [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
@@ -316,17 +334,23 @@ def _coordinates(x, sources, directions, w, ell: float) -> tuple:
 IMAGE_OFFSET = 1.0  # z_b; chosen by ``python -m training.medium_gather_check --offsets`` (docs/training.md)
 
 
-def _camera_image_weight(camera_images, entry_images, zb: float):
-    """(R, M) weight of the image across the camera ray's entry plane, from how far it lies from the beam's own
-    image: 0 within IMAGE_OFFSET z_b (the planes nearly coincide: the dipole's single image), rising linearly to 1
-    2 z_b further. The offset is a calibration on the spheres of training/medium_gather_check.py, not a
+def _distinct_weight(image, earlier: list, zb: float):
+    """Weight of an image that may duplicate ``earlier`` ones (each broadcastable to it), from how far it lies from
+    the nearest: 0 within IMAGE_OFFSET z_b (the planes nearly coincide: one image, the dipole's), rising linearly to
+    1 2 z_b further. The offset is a calibration on the spheres of training/medium_gather_check.py, not a
     derivation."""
-    apart = np.linalg.norm(camera_images - entry_images, axis=-1)
+    apart = functools.reduce(np.minimum, [np.linalg.norm(image - e, axis=-1) for e in earlier])
     return np.clip((apart - IMAGE_OFFSET * zb) / (2.0 * zb), 0.0, 1.0)
 
 
+def _exit_points(shape, starts, directions, length: float):
+    """Where rays entering ``shape`` at ``starts`` along ``directions`` leave it again (lengths in scene units)."""
+    back = starts - 1e-9 * length * directions
+    return starts + np.maximum(shape.interval(back, directions)[1], 0.0)[:, None] * directions
+
+
 def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, directions, kinds=KINDS,
-           steps: int = 24, chunk: int = 16, progress=None, images: float | None = None) -> dict:
+           steps: int = 24, chunk: int = 16, progress=None, images: Boundary | None = None) -> dict:
     """Radiance reaching ``origins`` along the rays ``-directions`` (camera rays: origins outside the shape,
     ``directions`` into it) from the double and multiple scattering of the ``beams``' light, one channel: the first
     segment of the camera ray inside the shape integrated with ``steps`` points of the exponential's quantiles,
@@ -335,11 +359,12 @@ def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, di
     ``l`` = ``mean_free_path`` scene units).
 
     The infinite-medium tables also count light that in the object would have left it (the method's approximation,
-    Sec. 3.2). ``images`` (the extrapolation distance z_b in mfp, ``extrapolation_distance``; needs
-    ``shape.normal``) subtracts, from multiple scattering, each beam's image across the extrapolated tangent plane
-    where it enters, and its image across the plane where the camera ray enters, weighted by how far the two
-    images lie apart (``_camera_image_weight``: 0 where the planes coincide, one image, the dipole's; 1 where they
-    are distinct, e.g. light entering the far side of a thin part), the difference clamped at 0. Measured against the
+    Sec. 3.2). ``images`` (``boundary(albedo, g)``; needs ``shape.normal``) subtracts, from multiple scattering,
+    each beam's images across the extrapolated tangent planes (z_b outside) where it enters and where it leaves the
+    object, and across the planes where the camera ray enters and leaves; each image after the first is weighted by
+    how far it lies from the earlier ones (``_distinct_weight``: 0 where two planes coincide, e.g. the lit side
+    seen from the lit side, 1 where they are distinct, e.g. the far side of a thin part), the exit planes' images
+    also by ``images.exits``; the difference is clamped at 0. Measured against the
     ground truth in docs/training.md. ``progress(done, total)`` is called after each chunk of rays."""
     ell = float(mean_free_path)
     origins, directions = np.asarray(origins, dtype=np.float64), np.asarray(directions, dtype=np.float64)
@@ -349,9 +374,13 @@ def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, di
     q = (np.arange(steps) + 0.5) / steps
     sources, beam_d, powers = beams.entries[None], beams.directions[None], beams.powers
     if images is not None:
-        zb = float(images) * ell
+        zb = float(images.zb) * ell
         beam_n = shape.normal(beams.entries)[None]
         entry_images = _mirror(sources, beam_d, sources, beam_n, zb)
+        leave = _exit_points(shape, beams.entries, beams.directions, ell)
+        exit_images = _mirror(sources, beam_d, leave[None], shape.normal(leave)[None], zb)
+        beam_images = [entry_images[0], exit_images[0]]
+        exit_weight = images.exits * _distinct_weight(exit_images[0], beam_images[:1], zb)[0][None, None, :]
     for start in range(0, len(rows), chunk):
         r = rows[start:start + chunk]
         tau = (t1[r] - t0[r]) / ell
@@ -362,17 +391,20 @@ def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, di
         x = enter[:, None, :] + s[..., None] * directions[r, None, :]
         w = -directions[r]  # the light's propagation direction towards the camera
         if images is not None:
-            cam_n = shape.normal(enter)[:, None, :]
-            camera_images = _mirror(sources, beam_d, enter[:, None, :], cam_n, zb)
-            camera_weight = _camera_image_weight(camera_images[0], entry_images[0], zb)[:, None, :]
+            far = enter + (t1[r] - np.maximum(t0[r], 0.0))[:, None] * directions[r]
+            camera_images = _mirror(sources, beam_d, enter[:, None, :], shape.normal(enter)[:, None, :], zb)
+            far_images = _mirror(sources, beam_d, far[:, None, :], shape.normal(far)[:, None, :], zb)
+            weighted = [(entry_images, 1.0), (exit_images, exit_weight),
+                        (camera_images, _distinct_weight(camera_images[0], beam_images, zb)[:, None, :]),
+                        (far_images, images.exits * _distinct_weight(far_images[0], beam_images + [camera_images[0]],
+                                                                     zb)[:, None, :])]
+            at_images = [(tables["multiple"].locate(*_coordinates(x, *image, w, ell)), weight)
+                         for image, weight in weighted]
         located = next(iter(tables.values())).locate(*_coordinates(x, sources, beam_d, w, ell))
-        if images is not None:
-            at_entry = tables["multiple"].locate(*_coordinates(x, *entry_images, w, ell))
-            at_camera = tables["multiple"].locate(*_coordinates(x, *camera_images, w, ell))
         for kind in kinds:
             value = tables[kind].at(located)
             if images is not None and kind == "multiple":
-                value = np.maximum(value - tables[kind].at(at_entry) - camera_weight * tables[kind].at(at_camera), 0.0)
+                value = np.maximum(value - sum(weight * tables[kind].at(at) for at, weight in at_images), 0.0)
             out[kind][r] += weight * (value @ powers).sum(axis=1) / ell ** 3
         if progress is not None:
             progress(min(start + chunk, len(rows)), len(rows))

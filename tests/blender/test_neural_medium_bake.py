@@ -78,7 +78,7 @@ def test_a_bake_of_the_sphere_renders_the_gather(tables, tmp_path):
     origins, directions = truth.camera_rays(SPHERE, truth.Sphere())
     beams = nm.Beams.join(nm.sun_beams(truth.Sphere(), sun, 12) for sun in SPHERE.suns)
     g = nm.gather(tables[1], GREY.mean_free_path[1], truth.Sphere(), beams, origins, directions, steps=8,
-                  images=nm.extrapolation_distance(GREY.albedo[1], GREY.g))
+                  images=nm.boundary(GREY.albedo[1], GREY.g))
     expected = (g["double"] + g["multiple"]).reshape(24, 24)
     inside = S.scene_mask(SPHERE) & (expected > 0.0)
     gain = (baked - plain)[..., 1]
