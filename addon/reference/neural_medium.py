@@ -364,8 +364,8 @@ def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, di
     object, and across the planes where the camera ray enters and leaves; each image after the first is weighted by
     how far it lies from the earlier ones (``_distinct_weight``: 0 where two planes coincide, e.g. the lit side
     seen from the lit side, 1 where they are distinct, e.g. the far side of a thin part), the exit planes' images
-    also by ``images.exits``; the difference is clamped at 0. Measured against the
-    ground truth in docs/training.md. ``progress(done, total)`` is called after each chunk of rays."""
+    also by ``images.exits``; the difference is clamped at 0. Measured against the ground truth in
+    docs/training.md. ``progress(done, total)`` is called after each chunk of rays."""
     ell = float(mean_free_path)
     origins, directions = np.asarray(origins, dtype=np.float64), np.asarray(directions, dtype=np.float64)
     out = {kind: np.zeros(len(origins)) for kind in kinds}
@@ -398,13 +398,14 @@ def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, di
                         (camera_images, _distinct_weight(camera_images[0], beam_images, zb)[:, None, :]),
                         (far_images, images.exits * _distinct_weight(far_images[0], beam_images + [camera_images[0]],
                                                                      zb)[:, None, :])]
-            at_images = [(tables["multiple"].locate(*_coordinates(x, *image, w, ell)), weight)
-                         for image, weight in weighted]
+            at_images = [(tables["multiple"].locate(*_coordinates(x, *image, w, ell)), image_weight)
+                         for image, image_weight in weighted]
         located = next(iter(tables.values())).locate(*_coordinates(x, sources, beam_d, w, ell))
         for kind in kinds:
             value = tables[kind].at(located)
             if images is not None and kind == "multiple":
-                value = np.maximum(value - sum(weight * tables[kind].at(at) for at, weight in at_images), 0.0)
+                subtracted = sum(image_weight * tables[kind].at(at) for at, image_weight in at_images)
+                value = np.maximum(value - subtracted, 0.0)
             out[kind][r] += weight * (value @ powers).sum(axis=1) / ell ** 3
         if progress is not None:
             progress(min(start + chunk, len(rows)), len(rows))
