@@ -21,22 +21,22 @@ the first segment only of a ray that leaves and re-enters a non-convex object. T
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
-from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 
 from ..reference import neural_medium as nm
 
-VERSION = 1  # of what a bake stores; bump when its meaning changes (older bakes read as stale)
+VERSION = 2  # of what a bake stores; bump when its meaning changes (older bakes read as stale). 2: exit images
 DIRECTIONS = 7  # the normal and six directions at 60 degrees around it
 COEFFICIENTS = ("c0", "cx", "cy", "cz")
 
 
-@dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True)
 class Settings:
     """Bake resolution: beams per lamp side (``cells`` x ``cells`` beams), quadrature points along each ray;
     ``boundary``: multiple scattering with the boundary's image sources (``reference.neural_medium.gather``'s
@@ -52,18 +52,6 @@ class Settings:
         if not (1 <= self.cells <= 256 and 1 <= self.steps <= 256 and 0.0 <= self.spacing <= 16.0):
             raise ValueError(f"bake settings out of range: cells {self.cells} (1-256), steps {self.steps} (1-256), "
                              f"spacing {self.spacing} (0-16 mean free paths)")
-
-    def key(self) -> list:
-        """What the bake key holds of the settings (a bake from before ``spacing`` existed gathered at every point
-        and keeps its key)."""
-        return [self.cells, self.steps, self.boundary] + ([self.spacing] if self.spacing else [])
-
-    def record(self) -> dict:
-        return {"cells": self.cells, "steps": self.steps, "boundary": self.boundary, "spacing": self.spacing}
-
-    @staticmethod
-    def from_record(record: dict) -> "Settings":
-        return Settings(**{"spacing": 0.0, **record})
 
 
 def reconstruction_grid(net) -> tuple:
@@ -209,7 +197,7 @@ def bake_key(params: dict, mesh_digest: str, lamps: list, settings: Settings, we
     networks' version, numbers to 5 significant digits (a value read back from a float32 socket is the same value).
     A changed key means the stored bake is stale."""
     key = json.dumps({"version": VERSION, "params": _rounded(params), "mesh": mesh_digest, "lamps": _rounded(lamps),
-                      "settings": settings.key(), "weights": weights},
+                      "settings": dataclasses.astuple(settings), "weights": weights},
                      sort_keys=True)
     return hashlib.sha256(key.encode()).hexdigest()[:16]
 

@@ -17,6 +17,7 @@ tables assume).
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -240,7 +241,7 @@ def bake_state(obj, scene) -> tuple[str, str]:
     info = json.loads(record)
     try:
         p = medium_nodes.current_params(mat)
-        key = current_key(obj, scene, p, nb.Settings.from_record(info["settings"]))
+        key = current_key(obj, scene, p, nb.Settings(**info["settings"]))
     except Exception as e:  # noqa: BLE001 - a hand-edited material or missing weights: say so
         return "unknown", f"Cannot check the bake: {e}"
     if key != info["key"]:
@@ -280,7 +281,7 @@ def bake_steps(obj, scene, depsgraph, p, settings: nb.Settings, tables=None):
             "record": {"key": key, "points": len(points), "gathered": len(chosen),
                        "beams": int(sum(len(b) for b in beams) // 3),
                        "seconds": round(time.perf_counter() - start, 2), "version": nb.VERSION,
-                       "settings": settings.record()}}
+                       "settings": dataclasses.asdict(settings)}}
 
 
 def apply(obj, result: dict) -> None:

@@ -286,11 +286,9 @@ def test_a_bake_at_fewer_points_stays_close_to_gathering_at_every_point(cloud):
     assert np.sqrt(np.mean((got - full) ** 2)) < 0.03 * full.mean()
 
 
-def test_a_bake_from_before_the_spacing_keeps_its_key():
+def test_the_bake_key_changes_with_the_spacing_and_refuses_nonsense():
     from addon.bake import neural_medium as nb
-    old = nb.Settings.from_record({"cells": 16, "steps": 12, "boundary": True})
-    assert old.spacing == 0.0 and old.key() == [16, 12, True]
-    assert nb.Settings().key() == [16, 12, True, 0.5]
-    assert nb.Settings.from_record(nb.Settings().record()) == nb.Settings()
+    key = [nb.bake_key({"g": 0.0}, "mesh", [], nb.Settings(spacing=s), "w") for s in (0.0, 0.5, 0.5)]
+    assert key[0] != key[1] == key[2]
     with pytest.raises(ValueError, match="spacing"):
         nb.Settings(spacing=float("nan"))
