@@ -119,3 +119,19 @@ def test_the_shipped_tables_are_finite_and_non_negative_at_the_extremes(albedo, 
         v = tables[0][kind].values
         assert np.all(np.isfinite(v)) and v.min() >= 0.0
     assert np.isfinite(nm.extrapolation_distance(albedo, g))
+
+
+def test_the_network_check_measures_power_and_its_misplacement(tmp_path, monkeypatch):
+    """``training.medium_network_check``: a table equal to the Monte Carlo one is exact (0, 0); twice it has an energy
+    ratio of +100 % and misplaces its whole power once; the shipped networks give finite, non-negative measures."""
+    from training import medium_network_check as check
+
+    assert medium_dataset.main(["--out", str(tmp_path), "--albedos", "0.9", "--gs", "0.5", "--quick",
+                                "--workers", "1"]) == 0
+    path = next(tmp_path.glob("a*.npz"))
+    energy, misplaced = check.table_errors(path, "multiple")
+    assert math.isfinite(energy) and misplaced >= 0.0
+    mc = nm.dataset_tables(path)["multiple"].values
+    for factor, expected in ((1.0, 0.0), (2.0, 1.0)):
+        monkeypatch.setattr(nm, "table", lambda *args, f=factor: f * mc)
+        assert check.table_errors(path, "multiple") == pytest.approx((expected, expected), abs=1e-12)

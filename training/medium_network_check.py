@@ -1,0 +1,116 @@
+"""What the shipped neural_medium networks cost, apart from the boundary: their tables against the Monte Carlo tables
+of ``training.medium_dataset`` (the paper's energy ratio and the power they put in the wrong cells and directions),
+and in a render, the gather (``addon.reference.neural_medium.gather``, boundary images on) with the networks' tables
+against the same gather with Monte Carlo tables of the medium itself, per preset and shape. What it prints goes into
+docs/training.md ("Networks").
+
+    python -m training.medium_network_check          # about six minutes here, after make medium-dataset
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from addon import presets
+from addon.bake import neural_medium as nb
+from addon.models import neural_medium as model
+from addon.reference import neural_medium as nm
+from addon.reference import neural_medium_truth as truth
+from addon.reference import scenes as S
+from training import medium_tracer as mt
+from training.medium_dataset import DEFAULT_CACHE
+from training.medium_gather_check import SHAPES
+
+# (preset, scale, shape); the green channel, the comparison scene's sun.
+CASES = (("cloud", 0.5, "sphere"), ("milk", 0.25, "sphere"), ("milk", 0.25, "box"), ("candle", 0.25, "sphere"),
+         ("dragon", 0.25, "sphere"))
+RESOLUTION, PHOTONS, DOUBLE_PHOTONS, CELLS, STEPS = 16, 40_000, 400_000, 32, 12
+
+
+def table_errors(path: Path, kind: str) -> tuple[float, float]:
+    """(energy ratio, misplaced power) of the shipped ``kind`` network's table for one dataset file: its power over
+    the Monte Carlo table's minus 1, and sum |Phi - Phi_MC| V dOmega over the Monte Carlo table's power (0: exact,
+    2: disjoint)."""
+    tables = nm.dataset_tables(path)
+    mc = tables[kind]
+    with np.load(path) as f:
+        meta = json.loads(str(f["meta"]))
+    grid = (mc.rho_edges, mc.z_edges, mc.theta, mc.phi)
+    predicted = nm.table(nm.network(kind), meta["alpha"], meta["g"], *grid)
+    power = nm.table_energy(mc.values, *grid[:2])
+    return (nm.table_energy(predicted, *grid[:2]) / power - 1.0,
+            nm.table_energy(np.abs(predicted - mc.values), *grid[:2]) / power)
+
+
+def table_lines(folders: list[Path]) -> list[str]:
+    lines = ["| network | materials | energy ratio: mean, worst | misplaced power: mean, worst | worst material |",
+             "|---|---|---|---|---|"]
+    for kind in nm.KINDS:
+        for folder in folders:
+            files = sorted(folder.glob("a*_g*.npz"))
+            if not files:
+                raise SystemExit(f"no dataset files in {folder}: run make medium-dataset first")
+            errors = np.array([table_errors(p, kind) for p in files])
+            worst = files[int(np.argmax(errors[:, 1]))].stem
+            lines.append(f"| {kind} | {folder.name} ({len(files)}) | {np.mean(np.abs(errors[:, 0])):.1%}, "
+                         f"{np.max(np.abs(errors[:, 0])):.1%} | {np.mean(errors[:, 1]):.1%}, "
+                         f"{np.max(errors[:, 1]):.1%} | {worst} |")
+    return lines
+
+
+def render_errors(name: str, scale: float, shape_name: str, channel: int = 1) -> dict:
+    """Mean and relative RMSE over the object's pixels of the gather with the networks' tables against the gather
+    with Monte Carlo tables, for double, multiple and both."""
+    p = model.params_from_dict({**presets.load(model.ID, name), "scale": scale})
+    albedo, g = p.albedo[channel], p.g
+    grid = mt.default_grid()
+    r = mt.simulate(albedo, g, grid, mt.Settings(photons=PHOTONS, double_photons=DOUBLE_PHOTONS, batches=2), seed=[7])
+    edges = (np.asarray(grid.rho_edges), np.asarray(grid.z_edges), grid.theta_centres(), grid.phi_centres())
+    scene, shape = S.sphere_scene(resolution=RESOLUTION), SHAPES[shape_name]
+    rays = truth.camera_rays(scene, shape)
+    beams = nm.Beams.join(nm.sun_beams(shape, sun, CELLS) for sun in scene.suns)
+
+    def gather(tables):
+        return nm.gather(tables, p.mean_free_path[channel], shape, beams, *rays, steps=STEPS,
+                         images=nm.boundary(albedo, g))
+
+    reference = gather({kind: nm.Table(r[kind], *edges) for kind in nm.KINDS})
+    networks = gather(nb.channel_tables(p)[channel])
+    out = {"albedo": albedo, "g": g, "mfp": 2.0 / p.mean_free_path[channel]}
+    for label, kinds in (("double", ("double",)), ("multiple", ("multiple",)), ("both", nm.KINDS)):
+        want, got = (sum(x[k] for k in kinds) for x in (reference, networks))
+        lit = want > 0.0
+        out[label] = (got[lit].mean() / want[lit].mean() - 1.0,
+                      float(np.sqrt(np.mean((got[lit] - want[lit]) ** 2)) / want[lit].mean()))
+    return out
+
+
+def render_lines() -> list[str]:
+    lines = ["| preset | scale | shape | mfp per 2 units | albedo, g | double: mean, rel. RMSE | multiple | both |",
+             "|---|---|---|---|---|---|---|---|"]
+    for name, scale, shape_name in CASES:
+        e = render_errors(name, scale, shape_name)
+        lines.append(f"| {name} | {scale:g} | {shape_name} | {e['mfp']:.1f} | {e['albedo']:.3f}, {e['g']:g} | "
+                     + " | ".join(f"{e[k][0]:+.1%}, {e[k][1]:.1%}" for k in ("double", "multiple", "both")) + " |")
+    return lines
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m training.medium_network_check", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", type=Path, default=DEFAULT_CACHE, help=f"dataset folder (default {DEFAULT_CACHE})")
+    a = ap.parse_args(argv)
+    start = time.perf_counter()
+    folders = [a.data, a.data.with_name(a.data.name + "-off-grid")]
+    print("\n".join(table_lines([f for f in folders if f.exists()])), "\n", flush=True)
+    print("\n".join(render_lines()))
+    print(f"({time.perf_counter() - start:.0f} s; {RESOLUTION} px, Monte Carlo tables of {PHOTONS:,} photons and "
+          f"{DOUBLE_PHOTONS:,} double walks, {CELLS} x {CELLS} beams, {STEPS} steps, the green channel)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
