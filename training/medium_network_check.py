@@ -1,16 +1,19 @@
-"""What the shipped neural_medium networks cost, apart from the boundary: their tables against the Monte Carlo tables
-of ``training.medium_dataset`` (the paper's energy ratio and the power they put in the wrong cells and directions),
-and in a render, the gather (``addon.reference.neural_medium.gather``, boundary images on) with the networks' tables
-against the same gather with Monte Carlo tables of the medium itself, per preset and shape. What it prints goes into
+"""What the bake's tables cost, apart from the boundary: the shipped networks' tables (and double scattering by
+quadrature, which the bake uses instead of the double network) against the Monte Carlo tables of
+``training.medium_dataset`` (the paper's energy ratio and the power they put in the wrong cells and directions), and
+in a render, the gather (``addon.reference.neural_medium.gather``, boundary images on) with the bake's tables
+(``addon.bake.neural_medium.channel_tables``) against the same gather with Monte Carlo tables of the medium itself,
+per preset and shape. What it prints goes into
 docs/training.md ("Networks").
 
-    python -m training.medium_network_check          # about six minutes here, after make medium-dataset
+    python -m training.medium_network_check          # about ten minutes here, after make medium-dataset
 """
 from __future__ import annotations
 
 import argparse
 import json
 import time
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -31,32 +34,44 @@ CASES = (("cloud", 0.5, "sphere"), ("milk", 0.25, "sphere"), ("milk", 0.25, "box
 RESOLUTION, PHOTONS, DOUBLE_PHOTONS, CELLS, STEPS = 16, 40_000, 400_000, 32, 12
 
 
-def table_errors(path: Path, kind: str) -> tuple[float, float]:
-    """(energy ratio, misplaced power) of the shipped ``kind`` network's table for one dataset file: its power over
+METHODS = (("double", "network"), ("double", "quadrature"), ("multiple", "network"))
+
+
+def table_errors(path: Path, kind: str, method: str = "network") -> tuple[float, float]:
+    """(energy ratio, misplaced power) of the ``kind`` table for one dataset file by ``method`` (the shipped network,
+    or for double scattering ``nm.double_table``, what the bake uses) against the Monte Carlo table: its power over
     the Monte Carlo table's minus 1, and sum |Phi - Phi_MC| V dOmega over the Monte Carlo table's power (0: exact,
     2: disjoint)."""
-    tables = nm.dataset_tables(path)
-    mc = tables[kind]
+    mc = nm.dataset_tables(path)[kind]
     with np.load(path) as f:
         meta = json.loads(str(f["meta"]))
     grid = (mc.rho_edges, mc.z_edges, mc.theta, mc.phi)
-    predicted = nm.table(nm.network(kind), meta["alpha"], meta["g"], *grid)
+    if method == "quadrature":
+        predicted = meta["alpha"] ** 2 * _double_shape(meta["g"], *(tuple(np.asarray(v).tolist()) for v in grid))
+    else:
+        predicted = nm.table(nm.network(kind), meta["alpha"], meta["g"], *grid)
     power = nm.table_energy(mc.values, *grid[:2])
     return (nm.table_energy(predicted, *grid[:2]) / power - 1.0,
             nm.table_energy(np.abs(predicted - mc.values), *grid[:2]) / power)
 
 
+@lru_cache(maxsize=8)
+def _double_shape(g: float, *grid) -> np.ndarray:
+    """``nm.double_table`` at albedo 1 (albedo^2 scales it), once per g and grid."""
+    return nm.double_table(1.0, g, *(np.asarray(v) for v in grid))
+
+
 def table_lines(folders: list[Path]) -> list[str]:
-    lines = ["| network | materials | energy ratio: mean, worst | misplaced power: mean, worst | worst material |",
-             "|---|---|---|---|---|"]
-    for kind in nm.KINDS:
+    lines = ["| table | by | materials | energy ratio: mean, worst | misplaced power: mean, worst | worst material |",
+             "|---|---|---|---|---|---|"]
+    for kind, method in METHODS:
         for folder in folders:
             files = sorted(folder.glob("a*_g*.npz"))
             if not files:
                 raise SystemExit(f"no dataset files in {folder}: run make medium-dataset first")
-            errors = np.array([table_errors(p, kind) for p in files])
+            errors = np.array([table_errors(p, kind, method) for p in files])
             worst = files[int(np.argmax(errors[:, 1]))].stem
-            lines.append(f"| {kind} | {folder.name} ({len(files)}) | {np.mean(np.abs(errors[:, 0])):.1%}, "
+            lines.append(f"| {kind} | {method} | {folder.name} ({len(files)}) | {np.mean(np.abs(errors[:, 0])):.1%}, "
                          f"{np.max(np.abs(errors[:, 0])):.1%} | {np.mean(errors[:, 1]):.1%}, "
                          f"{np.max(errors[:, 1]):.1%} | {worst} |")
     return lines

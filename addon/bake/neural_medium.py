@@ -6,8 +6,9 @@ n, that light leaves the object towards w (w . n > 0) with radiance
 
     L(x, w) = Integral over the first segment of the ray entering at x against w of exp(-s / l) Phi(x - s w, w) ds
 
-where Phi is the medium's in-scattered radiance of orders >= 2 (``reference.neural_medium.gather``: the tables of
-the networks for the channel's albedo and the medium's g, from every beam of every lamp). The bake evaluates L in
+where Phi is the medium's in-scattered radiance of orders >= 2 (``reference.neural_medium.gather``: for the
+channel's albedo and the medium's g, double scattering's table by quadrature and multiple scattering's from the
+network, from every beam of every lamp). The bake evaluates L in
 ``DIRECTIONS`` directions of x's outward hemisphere and stores the least-squares linear fit (L1 spherical
 harmonics, per channel)
 
@@ -31,7 +32,8 @@ import numpy as np
 
 from ..reference import neural_medium as nm
 
-VERSION = 2  # of what a bake stores; bump when its meaning changes (older bakes read as stale). 2: exit images
+VERSION = 3  # of what a bake stores; bump when its meaning changes (older bakes read as stale). 2: exit images,
+# 3: double scattering by quadrature
 DIRECTIONS = 7  # the normal and six directions at 60 degrees around it
 COEFFICIENTS = ("c0", "cx", "cy", "cz")
 
@@ -62,20 +64,26 @@ def reconstruction_grid(net) -> tuple:
 
 
 def channel_tables(p, folder=nm.WEIGHTS) -> list[dict]:
-    """Per RGB channel, {kind: Table} reconstructed from the shipped networks for the channel's albedo and the
-    medium's g (Sec. 3.7); channels with the same albedo share their tables, and the last few materials are kept
-    (a re-bake does not reconstruct them again)."""
+    """Per RGB channel, {kind: Table} for the channel's albedo and the medium's g: double scattering by quadrature
+    (``nm.double_table``, exact up to the grid: its shape depends on g alone, albedo^2 scales it), multiple scattering
+    reconstructed from the shipped network (Sec. 3.7); channels with the same albedo share their tables, and the
+    last few materials are kept (a re-bake does not reconstruct them again)."""
     return [_material_tables(float(albedo), float(p.g), str(folder)) for albedo in p.albedo]
 
 
 @lru_cache(maxsize=6)
 def _material_tables(albedo: float, g: float, folder: str) -> dict:
-    out = {}
-    for kind in nm.KINDS:
-        net = nm.network(kind, folder)
-        grid = reconstruction_grid(net)
-        out[kind] = nm.Table(nm.table(net, albedo, g, *grid), *grid)
-    return out
+    net = nm.network("multiple", folder)
+    grid = reconstruction_grid(net)
+    a = min(max(albedo, 0.0), 1.0)
+    return {"double": nm.Table(a * a * _double_shape(g, folder), *grid),
+            "multiple": nm.Table(nm.table(net, albedo, g, *grid), *grid)}
+
+
+@lru_cache(maxsize=2)
+def _double_shape(g: float, folder: str) -> np.ndarray:
+    """``nm.double_table`` at albedo 1 on the multiple network's grid."""
+    return nm.double_table(1.0, g, *reconstruction_grid(nm.network("multiple", folder)))
 
 
 def hemisphere_directions(normals: np.ndarray) -> np.ndarray:

@@ -32,7 +32,7 @@ def measure(samples: int) -> list[dict]:
 
 def view_fit_rows(views=(0.0, 45.0, 75.0), points: int = 400) -> list[dict]:
     """The bake's linear fit in the direction against the gather itself along each view (numpy, no Cycles): the
-    error a camera anywhere sees (the bake belongs to no camera). The cloud on the unit sphere (the networks' tables,
+    error a camera anywhere sees (the bake belongs to no camera). The cloud on the unit sphere (the bake's tables,
     boundary images), points on the half the view sees, the scene's sun."""
     import math
 
@@ -68,7 +68,7 @@ def view_fit_rows(views=(0.0, 45.0, 75.0), points: int = 400) -> list[dict]:
 def spacing_rows(points: int = 3000, spacings=(0.25, 0.5, 1.0, 2.0), large: int = 100_000) -> list[dict]:
     """The bake gathering at points ``spacing`` mean free paths apart and spreading to the rest
     (``bake.neural_medium.gathering_points``, ``spread``) against gathering at every point: ``points`` on the unit
-    sphere (a Fibonacci lattice), the scene's sun, the networks' tables, the radiance along the normal; and the time
+    sphere (a Fibonacci lattice), the scene's sun, the bake's tables, the radiance along the normal; and the time
     of a bake of ``large`` points at the default spacing. Grey media (the green channel's albedo)."""
     import math
     import time
@@ -134,13 +134,17 @@ def accuracy(sizes) -> str:
     rows, s = measure(sizes.samples), Sizes(samples=sizes.samples)
     out = ["## Neural media (neural_medium)", "",
            "The shipped networks (`make medium-networks`; the energy ratio is the power of the table a network "
-           "reconstructs over the Monte Carlo table's, minus 1, the paper's measure):", "", *network_lines(), "",
+           "reconstructs over the Monte Carlo table's, minus 1, the paper's measure). The bake uses the multiple "
+           "network and double scattering by quadrature (`reference.neural_medium.double_table`; the double network "
+           "is kept for comparison; both measured against the Monte Carlo tables and in a render by `python -m "
+           "training.medium_network_check`, docs/training.md):", "", *network_lines(), "",
            f"What Cycles renders ({s.resolution} px, {s.samples} samples, the comparison scene's sun; `lamina "
            "compare-medium --shape ...`) against Cycles' own full volumetric path tracing "
            f"({s.full_bounces} volume bounces) and, for the sphere (a 64 × 32 mesh) and the box (1.6 × 1.6 × 0.5 "
            f"units), the numpy ground truth (`reference/neural_medium_truth.py`, {s.truth_paths} paths per pixel, all "
            "orders; its own noise in the last column). The torus (radii 0.65 and 0.3) has no numpy truth. The bake: "
-           f"the networks' tables, {s.bake.cells} × {s.bake.cells} beams per lamp, {s.bake.steps} steps per ray, "
+           f"double scattering by quadrature and the multiple network's table, {s.bake.cells} × {s.bake.cells} beams "
+           f"per lamp, {s.bake.steps} steps per ray, "
            "multiple scattering with the boundary's image sources, gathered at points "
            f"{s.bake.spacing:g} mean free paths apart, linear in the direction per vertex. \"mfp\" is "
            "the mean free paths per 2 scene units (the sphere's diameter).", "",

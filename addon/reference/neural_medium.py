@@ -6,7 +6,8 @@ log(1 + Phi / PHI_0) of the tables that ``training/medium_tracer.py`` defines: P
 radiance emitted per unit volume into direction (theta, phi) at the point (rho, z) by the double (order 2) or
 multiple (orders >= 3) scattering of a unit point-directional source along +z in an infinite medium, lengths in
 mean free paths (sigma_t = 1), directions in the point's local frame (theta from +z, phi from the radial direction,
-folded to [0, pi]). Reconstruction: Phi = max(exp(network) - 1, 0).
+folded to [0, pi]). Reconstruction: Phi = max(exp(network) - 1, 0). Double scattering also has a closed form as a
+1-D integral along the beam (``double_table``), which the bake uses instead of the double network.
 
 Inputs reach the networks in [0, 1] through ``encode``, whose constants travel in each weights file's manifest
 (``encoding``): rho and z through the same sinh map as the training grid (uniform near the source, geometric far
@@ -104,6 +105,69 @@ def table_energy(phi_table: np.ndarray, rho_edges, z_edges) -> float:
     r, z = np.asarray(rho_edges, dtype=np.float64), np.asarray(z_edges, dtype=np.float64)
     volumes = np.pi * np.outer(np.diff(r * r), np.diff(z))
     return float(np.einsum("ijkl,ij,kl->", phi_table, volumes, bin_solid_angles(*phi_table.shape[2:])))
+
+
+def _hg(g: float, cos):
+    return (1.0 - g * g) / (4.0 * math.pi * (1.0 + g * g - 2.0 * g * cos) ** 1.5)
+
+
+def double_table(albedo: float, g: float, rho_edges, z_edges, theta, phi, nodes: int = 512, sub: int = 4,
+                 near_sub: int = 16) -> np.ndarray:
+    """Double scattering's table (n_rho, n_z, n_theta, n_phi) without a network: the 1-D integral over the first
+    collision at depth s on the beam, Phi_2(x, w) = albedo^2 Integral exp(-s) p(mu_1) exp(-r) / r^2 p(d . w) ds
+    (r = |x - s z|, d its direction, mu_1 = d . z, p Henyey-Greenstein), written in the angle psi of d from the beam
+    (z - s = rho cot psi, ds / r^2 = dpsi / rho): albedo^2 / rho Integral_psi0^pi exp(-s - r) p(cos psi) p(d . w)
+    dpsi, psi0 = atan2(rho, z); midpoints of ``nodes`` steps of psi over (0, pi), the first cut at psi0, dense
+    towards 0 and pi (Chebyshev spacing) where forward lobes and the short intervals behind the source lie. Cell
+    averages (the Monte Carlo tables' cells) from ``sub`` x ``sub`` points per cell, ``near_sub`` x ``near_sub``
+    within a mean free path of the source, where the density varies fastest; uniform in rho, whose ring area
+    rho drho cancels the 1 / rho. Each direction bin holds the average over ``sub`` x ``sub`` directions uniform in
+    solid angle within it (``theta`` and ``phi`` are the centres of equal bins over [0, pi]): a lobe narrower than
+    a bin keeps its power (the Monte Carlo tables smooth over the arrival bins instead)."""
+    a = min(max(float(albedo), 0.0), 1.0)
+    edges = 0.5 * math.pi * (1.0 - np.cos(np.linspace(0.0, math.pi, nodes + 1)))  # dense at 0 and pi
+    psi = 0.5 * (edges[1:] + edges[:-1])
+    arrival = np.stack([np.sin(psi), np.zeros_like(psi), np.cos(psi)], axis=1)  # (nodes, 3) in (e_rho, e_phi, e_z)
+    out_dirs = _bin_directions(len(theta), len(phi), sub)  # (n_dir, sub^2, 3)
+    second = _hg(float(g), np.clip(np.einsum("nk,dsk->nds", arrival, out_dirs), -1.0, 1.0)).mean(axis=2)
+    quadrature = (edges, psi, _hg(float(g), np.cos(psi)), second)
+    r_edges, z_edges = np.asarray(rho_edges, dtype=np.float64), np.asarray(z_edges, dtype=np.float64)
+    z0, z1 = z_edges[:-1], z_edges[1:]
+    near_z = (z0 < 1.0) & (z1 > -1.0)
+    out = np.zeros((len(r_edges) - 1, len(z0), second.shape[1]))
+    for i, (r0, r1) in enumerate(zip(r_edges[:-1], r_edges[1:])):
+        out[i] = _double_ring(r0, r1, z0, z1, sub, quadrature)
+        if r0 < 1.0 and near_z.any():
+            out[i, near_z] = _double_ring(r0, r1, z0[near_z], z1[near_z], near_sub, quadrature)
+    return (a * a * out).reshape(len(r_edges) - 1, len(z0), len(theta), len(phi))
+
+
+def _bin_directions(n_theta: int, n_phi: int, sub: int) -> np.ndarray:
+    """(n_theta n_phi, sub^2, 3) unit directions in the local frame (e_rho, e_phi, e_z), uniform in solid angle
+    within each of the equal (theta, phi) bins over [0, pi] x [0, pi]."""
+    frac = (np.arange(sub) + 0.5) / sub
+    t = np.linspace(0.0, math.pi, n_theta + 1)
+    cos_t = np.cos(t[:-1])[:, None] + frac[None, :] * (np.cos(t[1:]) - np.cos(t[:-1]))[:, None]  # (n_theta, sub)
+    p = (np.arange(n_phi)[:, None] + frac[None, :]) * math.pi / n_phi  # (n_phi, sub)
+    sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
+    c = np.broadcast_to(cos_t[:, None, :, None], (n_theta, n_phi, sub, sub))
+    sn = np.broadcast_to(sin_t[:, None, :, None], c.shape)
+    ph = np.broadcast_to(p[None, :, None, :], c.shape)
+    return np.stack([sn * np.cos(ph), sn * np.sin(ph), c], axis=-1).reshape(n_theta * n_phi, sub * sub, 3)
+
+
+def _double_ring(r0: float, r1: float, z0, z1, sub: int, quadrature) -> np.ndarray:
+    """``double_table``'s cell averages (n_z, n_dir) over one ring rho in [r0, r1] and the z cells [z0, z1], without
+    albedo^2."""
+    edges, psi, first, second = quadrature
+    frac = (np.arange(sub) + 0.5) / sub
+    R = (r0 + frac * (r1 - r0))[:, None, None, None]  # (sub, 1, 1, 1) against z (n_z, sub) and psi (nodes)
+    Z = (z0[:, None] + frac[None, :] * (z1 - z0)[:, None])[None, :, :, None]
+    psi0 = np.arctan2(R, Z)
+    width = np.clip(np.minimum(edges[1:], math.pi) - np.maximum(edges[:-1], psi0), 0.0, None)
+    s = Z - R / np.tan(psi)
+    w = np.where(s >= 0.0, np.exp(-np.maximum(s, 0.0) - R / np.sin(psi)), 0.0) * first * width
+    return np.einsum("azbn,nd->zd", w, second) * 2.0 / ((r0 + r1) * sub * sub)
 
 
 # ------------------------------------------------------------------------------------------ tables and the gather

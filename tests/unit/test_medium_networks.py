@@ -130,6 +130,7 @@ def test_the_network_check_measures_power_and_its_misplacement(tmp_path, monkeyp
                                 "--workers", "1"]) == 0
     path = next(tmp_path.glob("a*.npz"))
     energy, misplaced = check.table_errors(path, "multiple")
+    assert all(math.isfinite(v) for v in check.table_errors(path, "double", "quadrature"))
     assert math.isfinite(energy) and misplaced >= 0.0
     mc = nm.dataset_tables(path)["multiple"].values
     for factor, expected in ((1.0, 0.0), (2.0, 1.0)):
