@@ -148,7 +148,7 @@ class LAMINA_OT_bake_medium(bpy.types.Operator):
                                  description="Quadrature points along each gathering ray")
     spacing: bpy.props.FloatProperty(name="Point spacing (mfp)", default=nb.Settings.spacing, min=0.0, max=16.0,
                                      description="Surface points closer than this many mean free paths share one "
-                                                 "gather (0: every vertex gathers; 0.5: 2-4% from that, docs/accuracy.md)")
+                                                 "gather (0: every vertex gathers; 0.5: 2-3% from that, docs/accuracy.md)")
 
     _timer = None
     _steps = None
