@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..bake import mlp
+from . import hg
 
 KINDS = ("double", "multiple")
 WEIGHTS = Path(__file__).resolve().parents[1] / "bake" / "weights"
@@ -107,10 +108,6 @@ def table_energy(phi_table: np.ndarray, rho_edges, z_edges) -> float:
     return float(np.einsum("ijkl,ij,kl->", phi_table, volumes, bin_solid_angles(*phi_table.shape[2:])))
 
 
-def _hg(g: float, cos):
-    return (1.0 - g * g) / (4.0 * math.pi * (1.0 + g * g - 2.0 * g * cos) ** 1.5)
-
-
 def double_table(albedo: float, g: float, rho_edges, z_edges, theta, phi, nodes: int = 512, sub: int = 4,
                  near_sub: int = 16) -> np.ndarray:
     """Double scattering's table (n_rho, n_z, n_theta, n_phi) without a network: the 1-D integral over the first
@@ -129,8 +126,8 @@ def double_table(albedo: float, g: float, rho_edges, z_edges, theta, phi, nodes:
     psi = 0.5 * (edges[1:] + edges[:-1])
     arrival = np.stack([np.sin(psi), np.zeros_like(psi), np.cos(psi)], axis=1)  # (nodes, 3) in (e_rho, e_phi, e_z)
     out_dirs = _bin_directions(len(theta), len(phi), sub)  # (n_dir, sub^2, 3)
-    second = _hg(float(g), np.clip(np.einsum("nk,dsk->nds", arrival, out_dirs), -1.0, 1.0)).mean(axis=2)
-    quadrature = (edges, psi, _hg(float(g), np.cos(psi)), second)
+    second = hg.eval(float(g), np.clip(np.einsum("nk,dsk->nds", arrival, out_dirs), -1.0, 1.0)).mean(axis=2)
+    quadrature = (edges, psi, hg.eval(float(g), np.cos(psi)), second)
     r_edges, z_edges = np.asarray(rho_edges, dtype=np.float64), np.asarray(z_edges, dtype=np.float64)
     z0, z1 = z_edges[:-1], z_edges[1:]
     near_z = (z0 < 1.0) & (z1 > -1.0)
