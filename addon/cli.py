@@ -141,8 +141,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--json", help="a JSON file with a neural_medium dict")
     cm.add_argument("--scale", type=float, help="scene units per unit length (the sphere has radius 1)")
     cm.add_argument("--shape", default="sphere", choices=COMPARE_SHAPES,
-                    help="what the medium fills: the comparison sphere, a 1.6 x 1.6 x 0.5 box, a torus (no numpy "
-                         "truth: measured against Cycles' full path tracing)")
+                    help="what the medium fills: the comparison sphere, a 1.6 x 1.6 x 0.5 box, a torus or "
+                         "Suzanne (these two have no numpy truth: measured against Cycles' full path tracing)")
     cm.add_argument("--samples", type=int, default=64, help="Cycles samples per pixel")
     cm.add_argument("--resolution", type=int, default=48, help="image width and height in pixels")
     cm.add_argument("--truth-paths", type=int, default=1024, help="ground-truth paths per pixel")

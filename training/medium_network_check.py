@@ -3,10 +3,10 @@ quadrature, which the bake uses instead of the double network) against the Monte
 ``training.medium_dataset`` (the paper's energy ratio and the power they put in the wrong cells and directions), and
 in a render, the gather (``addon.reference.neural_medium.gather``, boundary images on) with the bake's tables
 (``addon.bake.neural_medium.channel_tables``) against the same gather with Monte Carlo tables of the medium itself,
-per preset and shape. What it prints goes into
-docs/training.md ("Networks").
+per preset and shape. What it prints goes into docs/training.md ("Networks").
 
-    python -m training.medium_network_check          # about ten minutes here, after make medium-dataset
+    python -m training.medium_network_check          # about five minutes here, after make medium-dataset
+    python -m training.medium_network_check --weights /tmp/w     # networks trained elsewhere, before shipping them
 """
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ RESOLUTION, PHOTONS, DOUBLE_PHOTONS, CELLS, STEPS = 16, 40_000, 400_000, 32, 12
 METHODS = (("double", "network"), ("double", "quadrature"), ("multiple", "network"))
 
 
-def table_errors(path: Path, kind: str, method: str = "network") -> tuple[float, float]:
+def table_errors(path: Path, kind: str, method: str = "network", weights: Path = nm.WEIGHTS) -> tuple[float, float]:
     """(energy ratio, misplaced power) of the ``kind`` table for one dataset file by ``method`` (the shipped network,
     or for double scattering ``nm.double_table``, what the bake uses) against the Monte Carlo table: its power over
     the Monte Carlo table's minus 1, and sum |Phi - Phi_MC| V dOmega over the Monte Carlo table's power (0: exact,
@@ -49,7 +49,7 @@ def table_errors(path: Path, kind: str, method: str = "network") -> tuple[float,
     if method == "quadrature":
         predicted = meta["alpha"] ** 2 * _double_shape(meta["g"], *(tuple(np.asarray(v).tolist()) for v in grid))
     else:
-        predicted = nm.table(nm.network(kind), meta["alpha"], meta["g"], *grid)
+        predicted = nm.table(nm.network(kind, weights), meta["alpha"], meta["g"], *grid)
     power = nm.table_energy(mc.values, *grid[:2])
     return (nm.table_energy(predicted, *grid[:2]) / power - 1.0,
             nm.table_energy(np.abs(predicted - mc.values), *grid[:2]) / power)
@@ -61,7 +61,15 @@ def _double_shape(g: float, *grid) -> np.ndarray:
     return nm.double_table(1.0, g, *(np.asarray(v) for v in grid))
 
 
-def table_lines(folders: list[Path]) -> list[str]:
+def quadrature_seconds() -> float:
+    """Time of ``nm.double_table`` for one g on the tracer's default grid (what a bake spends per material)."""
+    grid = mt.default_grid()
+    start = time.perf_counter()
+    nm.double_table(1.0, 0.3, grid.rho_edges, grid.z_edges, grid.theta_centres(), grid.phi_centres())
+    return time.perf_counter() - start
+
+
+def table_lines(folders: list[Path], weights: Path) -> list[str]:
     lines = ["| table | by | materials | energy ratio: mean, worst | misplaced power: mean, worst | worst material |",
              "|---|---|---|---|---|---|"]
     for kind, method in METHODS:
@@ -69,7 +77,7 @@ def table_lines(folders: list[Path]) -> list[str]:
             files = sorted(folder.glob("a*_g*.npz"))
             if not files:
                 raise SystemExit(f"no dataset files in {folder}: run make medium-dataset first")
-            errors = np.array([table_errors(p, kind, method) for p in files])
+            errors = np.array([table_errors(p, kind, method, weights) for p in files])
             worst = files[int(np.argmax(errors[:, 1]))].stem
             lines.append(f"| {kind} | {method} | {folder.name} ({len(files)}) | {np.mean(np.abs(errors[:, 0])):.1%}, "
                          f"{np.max(np.abs(errors[:, 0])):.1%} | {np.mean(errors[:, 1]):.1%}, "
@@ -77,8 +85,8 @@ def table_lines(folders: list[Path]) -> list[str]:
     return lines
 
 
-def render_errors(name: str, scale: float, shape_name: str, channel: int = 1) -> dict:
-    """Mean and relative RMSE over the object's pixels of the gather with the networks' tables against the gather
+def render_errors(name: str, scale: float, shape_name: str, weights: Path, channel: int = 1) -> dict:
+    """Mean and relative RMSE over the object's pixels of the gather with the bake's tables against the gather
     with Monte Carlo tables, for double, multiple and both."""
     p = model.params_from_dict({**presets.load(model.ID, name), "scale": scale})
     albedo, g = p.albedo[channel], p.g
@@ -94,7 +102,7 @@ def render_errors(name: str, scale: float, shape_name: str, channel: int = 1) ->
                          images=nm.boundary(albedo, g))
 
     reference = gather({kind: nm.Table(r[kind], *edges) for kind in nm.KINDS})
-    networks = gather(nb.channel_tables(p)[channel])
+    networks = gather(nb.channel_tables(p, weights)[channel])
     out = {"albedo": albedo, "g": g, "mfp": 2.0 / p.mean_free_path[channel]}
     for label, kinds in (("double", ("double",)), ("multiple", ("multiple",)), ("both", nm.KINDS)):
         want, got = (sum(x[k] for k in kinds) for x in (reference, networks))
@@ -104,11 +112,11 @@ def render_errors(name: str, scale: float, shape_name: str, channel: int = 1) ->
     return out
 
 
-def render_lines() -> list[str]:
+def render_lines(weights: Path) -> list[str]:
     lines = ["| preset | scale | shape | mfp per 2 units | albedo, g | double: mean, rel. RMSE | multiple | both |",
              "|---|---|---|---|---|---|---|---|"]
     for name, scale, shape_name in CASES:
-        e = render_errors(name, scale, shape_name)
+        e = render_errors(name, scale, shape_name, weights)
         lines.append(f"| {name} | {scale:g} | {shape_name} | {e['mfp']:.1f} | {e['albedo']:.3f}, {e['g']:g} | "
                      + " | ".join(f"{e[k][0]:+.1%}, {e[k][1]:.1%}" for k in ("double", "multiple", "both")) + " |")
     return lines
@@ -117,11 +125,13 @@ def render_lines() -> list[str]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.medium_network_check", description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_CACHE, help=f"dataset folder (default {DEFAULT_CACHE})")
+    ap.add_argument("--weights", type=Path, default=nm.WEIGHTS, help="folder of the networks (default: the shipped)")
     a = ap.parse_args(argv)
     start = time.perf_counter()
     folders = [a.data, a.data.with_name(a.data.name + "-off-grid")]
-    print("\n".join(table_lines([f for f in folders if f.exists()])), "\n", flush=True)
-    print("\n".join(render_lines()))
+    print("\n".join(table_lines([f for f in folders if f.exists()], a.weights)), "\n", flush=True)
+    print(f"double scattering by quadrature: {quadrature_seconds():.1f} s per g on the dataset's grid\n", flush=True)
+    print("\n".join(render_lines(a.weights)))
     print(f"({time.perf_counter() - start:.0f} s; {RESOLUTION} px, Monte Carlo tables of {PHOTONS:,} photons and "
           f"{DOUBLE_PHOTONS:,} double walks, {CELLS} x {CELLS} beams, {STEPS} steps, the green channel)")
     return 0

@@ -50,12 +50,18 @@ def load_material(path: Path, kind: str) -> dict:
                 "theta": f["theta"], "phi": f["phi"]}
 
 
-def samples(material: dict) -> tuple[np.ndarray, np.ndarray]:
-    """(inputs (N, 6), targets log(1 + Phi / PHI_0) (N,)) of every cell and direction bin of a material's table."""
+def samples(material: dict, power_share: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(inputs (N, 6), targets log(1 + Phi / PHI_0) (N,), loss weights (N,)) of every cell and direction bin of a
+    material's table. The weights average 1 over the material: a share ``power_share`` of them goes to the samples
+    in proportion to the power they emit (cell volume x bin solid angle x Phi, what the energy ratio and a render
+    integrate), the rest uniformly."""
     rho_c, z_c = nm.cell_centres(material["rho_edges"], material["z_edges"])
     grid = np.meshgrid(rho_c, z_c, material["theta"], material["phi"], indexing="ij")
     x = nm.encode(*grid, material["alpha"], material["g"])
-    return x.astype(np.float32), nm.target(material["table"]).ravel().astype(np.float32)
+    power = nm.cell_powers(material["table"], material["rho_edges"], material["z_edges"]).ravel()
+    weights = (1.0 - power_share) + power_share * power * (power.size / max(power.sum(), 1e-300))
+    return (x.astype(np.float32), nm.target(material["table"]).ravel().astype(np.float32),
+            weights.astype(np.float32))
 
 
 def make_network(seed: int) -> torch.nn.Sequential:
@@ -75,14 +81,15 @@ def to_mlp(net: torch.nn.Sequential, manifest: dict) -> mlp.MLP:
                    tuple(m.bias.detach().numpy().astype(np.float64) for m in linears), manifest)
 
 
-def fit(x: np.ndarray, y: np.ndarray, kind: str, minutes: float, seed: int, log=print) -> tuple:
-    """Train on (x, y) for about ``minutes``; returns (network with the best held-out loss, info)."""
+def fit(x: np.ndarray, y: np.ndarray, w: np.ndarray, kind: str, minutes: float, seed: int, log=print) -> tuple:
+    """Train on (x, y) with loss weights w for about ``minutes``; returns (network with the best held-out loss,
+    info)."""
     rng = np.random.default_rng(seed)
     order = rng.permutation(len(x))
     n_val = max(1, int(VALIDATION_SHARE * len(x)))
     val, train = order[:n_val], order[n_val:]
-    xt, yt = torch.from_numpy(x[train]), torch.from_numpy(y[train])
-    xv, yv = torch.from_numpy(x[val]), torch.from_numpy(y[val])
+    xt, yt, wt = torch.from_numpy(x[train]), torch.from_numpy(y[train]), torch.from_numpy(w[train])
+    xv, yv, wv = torch.from_numpy(x[val]), torch.from_numpy(y[val]), torch.from_numpy(w[val])
     net = make_network(seed)
     opt = torch.optim.Adam(net.parameters(), lr=LEARNING_RATE[kind])
     budget, start = 60.0 * minutes, time.perf_counter()
@@ -96,21 +103,21 @@ def fit(x: np.ndarray, y: np.ndarray, kind: str, minutes: float, seed: int, log=
             for group in opt.param_groups:
                 group["lr"] = LEARNING_RATE[kind] * 0.5 * (1.0 + math.cos(math.pi * frac))
             idx = perm[s:s + BATCH]
-            loss = torch.mean((net(xt[idx])[:, 0] - yt[idx]) ** 2)
+            loss = torch.mean(wt[idx] * (net(xt[idx])[:, 0] - yt[idx]) ** 2)
             opt.zero_grad()
             loss.backward()
             opt.step()
         epoch += 1
         with torch.no_grad():
-            val_loss = float(torch.mean((net(xv)[:, 0] - yv) ** 2))
+            val_loss = float(torch.mean(wv * (net(xv)[:, 0] - yv) ** 2))
         if val_loss < best[0]:
             best = (val_loss, {k: v.clone() for k, v in net.state_dict().items()})
-        log(f"{kind}: epoch {epoch}, held-out L2 {val_loss:.3e} ({time.perf_counter() - start:.0f} s)")
+        log(f"{kind}: epoch {epoch}, held-out weighted L2 {val_loss:.3e} ({time.perf_counter() - start:.0f} s)")
         if time.perf_counter() - start >= budget:
             break
     net.load_state_dict(best[1])
     with torch.no_grad():
-        train_loss = float(torch.mean((net(xt)[:, 0] - yt) ** 2))
+        train_loss = float(torch.mean(wt * (net(xt)[:, 0] - yt) ** 2))
     return net, {"epochs": epoch, "train_l2": train_loss, "held_out_l2": best[0],
                  "seconds": round(time.perf_counter() - start, 1)}
 
@@ -132,19 +139,18 @@ def summary(ratios: dict) -> dict:
 
 
 def train_kind(kind: str, files: list[Path], held_out: set[str], minutes: float, seed: int, out: Path,
-               log=print, off_grid: list[Path] = ()) -> dict:
+               log=print, off_grid: list[Path] = (), power_share: float = 0.0) -> dict:
     """Train, evaluate and export the ``kind`` network; returns its manifest."""
     materials = [load_material(p, kind) for p in files]
     training = [m for m in materials if m["name"] not in held_out]
     if not training:
         raise SystemExit("no training materials left after --hold-out")
-    xs, ys = zip(*(samples(m) for m in training))
-    x, y = np.concatenate(xs), np.concatenate(ys)
-    net, info = fit(x, y, kind, minutes, seed, log)
+    x, y, w = (np.concatenate(parts) for parts in zip(*(samples(m, power_share) for m in training)))
+    net, info = fit(x, y, w, kind, minutes, seed, log)
     manifest = {"network": f"neural_medium {kind}", "activation": "tanh", "encoding": nm.ENCODING,
                 "target": "log(1 + Phi / phi_0)", "phi_0": nm.PHI_0, "layers": [6, *HIDDEN, 1],
                 "data": {"materials": [m["name"] for m in training], "samples": int(len(x))},
-                "seed": seed, "minutes": minutes, **info,
+                "seed": seed, "minutes": minutes, "power_share": power_share, **info,
                 "date": datetime.date.today().isoformat(), "code_version": code_version()}
     model = to_mlp(net, manifest)
     manifest["grid"] = {k: np.asarray(training[0][k]).tolist() for k in ("rho_edges", "z_edges", "theta", "phi")}
@@ -172,6 +178,9 @@ def main(argv=None) -> int:
     ap.add_argument("--hold-out", nargs="*", default=[], help="material names (a<albedo>_g<g>) kept out of training")
     ap.add_argument("--off-grid", type=Path, help="a dataset folder of materials between the grid's (albedo, g), "
                                                   "only evaluated (the manifest's off_grid energy ratios)")
+    ap.add_argument("--power-share", type=float, default=0.0,
+                    help="share of each material's loss weight given in proportion to the power a sample emits "
+                         "(0: every cell and direction alike, the paper's)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quick", action="store_true", help="a few seconds per network, for tests")
     a = ap.parse_args(argv)
@@ -186,7 +195,8 @@ def main(argv=None) -> int:
     if a.off_grid and not off_grid:
         raise SystemExit(f"--off-grid: no dataset files in {a.off_grid}")
     for kind in a.kinds:
-        train_kind(kind, files, set(a.hold_out), 0.05 if a.quick else a.minutes, a.seed, a.out, off_grid=off_grid)
+        train_kind(kind, files, set(a.hold_out), 0.05 if a.quick else a.minutes, a.seed, a.out, off_grid=off_grid,
+                   power_share=a.power_share)
     return 0
 
 

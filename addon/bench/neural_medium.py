@@ -12,9 +12,10 @@ from ..reference import neural_medium as nm
 from .common import pct
 
 MODEL = model.ID
-# (preset, scale, shape): 4.4, 10 and 10.7 mfp across the sphere; a thick tile and a torus (thin parts, not convex)
+# (preset, scale, shape): 4.4, 10 and 10.7 mfp across the sphere; a thick tile, a torus and Suzanne (thin parts, not
+# convex)
 CASES = (("cloud", 0.5, "sphere"), ("candle", 0.1, "sphere"), ("milk", 0.25, "sphere"), ("oil", 0.05, "sphere"),
-         ("cloud", 0.5, "box"), ("milk", 0.25, "box"), ("milk", 0.25, "torus"))
+         ("cloud", 0.5, "box"), ("milk", 0.25, "box"), ("milk", 0.25, "torus"), ("milk", 0.25, "suzanne"))
 
 
 EQUAL_ERROR_SAMPLES = 4096  # the most samples Cycles' full path tracing gets to reach the bake's error
@@ -142,7 +143,8 @@ def accuracy(sizes) -> str:
            "compare-medium --shape ...`) against Cycles' own full volumetric path tracing "
            f"({s.full_bounces} volume bounces) and, for the sphere (a 64 × 32 mesh) and the box (1.6 × 1.6 × 0.5 "
            f"units), the numpy ground truth (`reference/neural_medium_truth.py`, {s.truth_paths} paths per pixel, all "
-           "orders; its own noise in the last column). The torus (radii 0.65 and 0.3) has no numpy truth. The bake: "
+           "orders; its own noise in the last column). The torus (radii 0.65 and 0.3) and Suzanne (her head, eye "
+           "sockets closed, 1.9 units wide) have no numpy truth. The bake: "
            f"double scattering by quadrature and the multiple network's table, {s.bake.cells} × {s.bake.cells} beams "
            f"per lamp, {s.bake.steps} steps per ray, "
            "multiple scattering with the boundary's image sources, gathered at points "

@@ -192,11 +192,12 @@ def unshadowed(beams: nm.Beams, lamp: dict, scene, depsgraph, obj) -> nm.Beams:
             distance = 1e9
         else:
             distance = float(np.linalg.norm(np.asarray(lamp["position"]) - entry))
-        hit, _, _, _, other, _ = scene.ray_cast(depsgraph, origin, -Vector(d), distance=distance)
+        hit, location, _, _, other, _ = scene.ray_cast(depsgraph, origin, -Vector(d), distance=distance)
         while hit and other is not None and other.original == obj.original:
-            origin = hit - 1e-5 * Vector(d)
-            distance -= (Vector(entry) - hit).length
-            hit, _, _, _, other, _ = scene.ray_cast(depsgraph, origin, -Vector(d), distance=max(distance, 0.0))
+            origin = location - 1e-5 * Vector(d)
+            distance -= (Vector(entry) - location).length
+            hit, location, _, _, other, _ = scene.ray_cast(depsgraph, origin, -Vector(d),
+                                                           distance=max(distance, 0.0))
         keep[i] = not hit
     return nm.Beams(beams.entries[keep], beams.directions[keep], beams.powers[keep])
 

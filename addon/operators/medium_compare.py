@@ -3,8 +3,8 @@ volumetric path tracing, and Cycles' random-walk subsurface scattering of the sa
 ``nodes/subsurface_np.py``: what an artist would use instead of a volume), each with its render time and its error against Cycles' full path tracing (the external
 truth) and, for the shapes it renders (sphere, box), the numpy ground truth (``reference/neural_medium_truth.py``,
 all orders). Shapes: the comparison sphere, a box (a thick tile: thin parts at its edges) and a torus (closed, not
-convex). Shared by ``lamina compare-medium`` (pictures and report.json) and the bench. The user's scene is
-untouched: everything renders in ``cycles_render``'s temporary scene (its mesh replaced for the box and torus),
+convex) and Suzanne (her head, eye sockets closed: thin ears, a mesh as an artist has one). Shared by ``lamina compare-medium`` (pictures and report.json) and the bench. The user's scene is
+untouched: everything renders in ``cycles_render``'s temporary scene (its mesh replaced for the other shapes),
 whose sun the bake uses.
 """
 from __future__ import annotations
@@ -90,11 +90,51 @@ def _torus_mesh(segments: int = 48, sides: int = 16):
     return verts, faces
 
 
+SUZANNE_SCALE = 0.7  # her head (2.7 units wide as Blender makes it) about 2 units across, as the comparison sphere
+
+
+def _suzanne_mesh():
+    """Suzanne's head without her eyes (separate parts inside it), the sockets filled to close it, subdivided once
+    (the bake lives at vertices), turned to face the comparison camera."""
+    bm = bmesh.new()
+    try:
+        bmesh.ops.create_monkey(bm)
+        head = max(_islands(bm), key=len)
+        bmesh.ops.delete(bm, geom=[v for v in bm.verts if v not in head], context="VERTS")
+        bmesh.ops.holes_fill(bm, edges=bm.edges[:], sides=0)
+        bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=1, use_grid_fill=True)
+        verts = [tuple(SUZANNE_SCALE * x for x in (v.co.x, v.co.z, -v.co.y)) for v in bm.verts]
+        faces = [tuple(v.index for v in f.verts) for f in bm.faces]
+    finally:
+        bm.free()
+    return verts, faces
+
+
+def _islands(bm) -> list[set]:
+    """The connected parts of a bmesh, as sets of vertices."""
+    seen, parts = set(), []
+    for start in bm.verts:
+        if start in seen:
+            continue
+        part, stack = set(), [start]
+        while stack:
+            v = stack.pop()
+            if v not in part:
+                part.add(v)
+                stack.extend(e.other_vert(v) for e in v.link_edges)
+        seen |= part
+        parts.append(part)
+    return parts
+
+
+MESHES = {"box": _box_mesh, "torus": _torus_mesh, "suzanne": _suzanne_mesh}
+
+
 def _reshape(obj, shape: str) -> None:
     """Give the temporary scene's object the ``shape``'s mesh (the sphere stays as cycles_render made it)."""
     if shape == "sphere":
         return
-    verts, faces = _box_mesh() if shape == "box" else _torus_mesh()
+    verts, faces = MESHES[shape]()
     mesh = obj.data
     mesh.clear_geometry()
     mesh.from_pydata(verts, [], faces)

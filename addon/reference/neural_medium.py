@@ -101,11 +101,17 @@ def bin_solid_angles(n_theta: int, n_phi: int) -> np.ndarray:
     return np.outer(np.cos(t[:-1]) - np.cos(t[1:]), np.full(n_phi, 2.0 * math.pi / n_phi))
 
 
-def table_energy(phi_table: np.ndarray, rho_edges, z_edges) -> float:
-    """Power the table emits, per unit source power: the sum of Phi x cell volume x bin solid angle."""
+def cell_powers(phi_table: np.ndarray, rho_edges, z_edges) -> np.ndarray:
+    """Power each cell and direction bin of a table emits, per unit source power: Phi x cell volume x bin solid
+    angle."""
     r, z = np.asarray(rho_edges, dtype=np.float64), np.asarray(z_edges, dtype=np.float64)
     volumes = np.pi * np.outer(np.diff(r * r), np.diff(z))
-    return float(np.einsum("ijkl,ij,kl->", phi_table, volumes, bin_solid_angles(*phi_table.shape[2:])))
+    return np.einsum("ijkl,ij,kl->ijkl", phi_table, volumes, bin_solid_angles(*phi_table.shape[2:]))
+
+
+def table_energy(phi_table: np.ndarray, rho_edges, z_edges) -> float:
+    """Power the table emits, per unit source power."""
+    return float(cell_powers(phi_table, rho_edges, z_edges).sum())
 
 
 def double_table(albedo: float, g: float, rho_edges, z_edges, theta, phi, nodes: int = 512, sub: int = 4,
@@ -121,6 +127,10 @@ def double_table(albedo: float, g: float, rho_edges, z_edges, theta, phi, nodes:
     rho drho cancels the 1 / rho. Each direction bin holds the average over ``sub`` x ``sub`` directions uniform in
     solid angle within it (``theta`` and ``phi`` are the centres of equal bins over [0, pi]): a lobe narrower than
     a bin keeps its power (the Monte Carlo tables smooth over the arrival bins instead)."""
+    for name, centres in (("theta", theta), ("phi", phi)):
+        n = len(centres)
+        if not np.allclose(centres, (np.arange(n) + 0.5) * math.pi / n):
+            raise ValueError(f"double_table: {name} must be the centres of {n} equal bins over [0, pi]")
     a = min(max(float(albedo), 0.0), 1.0)
     edges = 0.5 * math.pi * (1.0 - np.cos(np.linspace(0.0, math.pi, nodes + 1)))  # dense at 0 and pi
     psi = 0.5 * (edges[1:] + edges[:-1])

@@ -68,7 +68,7 @@ from .montecarlo import mean_stderr
 __all__ = ["Sphere", "Slab", "Box", "GROUPS", "optical_depth", "camera_rays", "radiance", "render", "slab_albedo"]
 
 GROUPS = ("order1", "order2", "multiple")  # orders 1, 2, >= 3
-COMPARE_SHAPES = ("sphere", "box", "torus")  # what ``compare-medium`` fills (the torus has no truth here)
+COMPARE_SHAPES = ("sphere", "box", "torus", "suzanne")  # what ``compare-medium`` fills (truth: sphere and box)
 ROULETTE = 0.1  # weight below which Russian roulette starts (survival w / ROULETTE, weight ROULETTE after)
 MAX_VERTICES = 100_000  # a walk longer than this raises (albedo 1 in an optically huge medium: pass max_order)
 CHUNK = 1 << 17  # paths per vectorised block

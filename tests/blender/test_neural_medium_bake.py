@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
+import bmesh  # noqa: E402 - after bpy
 
 from addon import presets  # noqa: E402
 from addon.bake import neural_medium as nb  # noqa: E402
@@ -127,6 +128,44 @@ def test_bad_input_is_refused_before_any_work():
         next(medium_bake.bake_steps(obj, scene, scene.view_layers[0].depsgraph, GREY, nb.Settings()))
     assert medium_bake.mesh_problem(bpy.data.objects.new("empty", None)).startswith("select a mesh")
     assert not medium_nodes.has_bake(obj.data)  # nothing half-written
+
+
+def test_other_objects_shadow_the_beams_and_the_object_itself_does_not():
+    """A beam whose way back to the sun crosses another object is dropped; one whose way back crosses the medium's
+    own mesh (here: entries placed on the far side of the sphere) is kept, since the object is the medium."""
+    scene, obj = _scene_with(_sphere_mesh())
+    lamp = {"type": "SUN"}
+    down = np.array([[0.0, 0.0, -1.0]] * 2)
+    far_side = nm.Beams(np.array([[0.0, 0.0, -1.0], [0.3, 0.0, -0.9]]), down, np.ones(2))
+    scene.view_layers[0].update()
+    assert len(medium_bake.unshadowed(far_side, lamp, scene, scene.view_layers[0].depsgraph, obj)) == 2
+    roof = bpy.data.meshes.new("roof")
+    roof.from_pydata([(-2, -2, 3), (2, -2, 3), (2, 0, 3), (-2, 0, 3)], [], [(0, 1, 2, 3)])  # over y < 0
+    scene.collection.objects.link(bpy.data.objects.new("roof", roof))
+    scene.view_layers[0].update()
+    top = nm.Beams(np.array([[0.0, -0.5, 0.85], [0.0, 0.5, 0.85]]), down, np.ones(2))
+    kept = medium_bake.unshadowed(top, lamp, scene, scene.view_layers[0].depsgraph, obj)
+    assert len(kept) == 1 and kept.entries[0, 1] == 0.5
+
+
+@pytest.mark.parametrize("shape", ["box", "torus", "suzanne"])
+def test_the_comparison_meshes_are_closed_and_in_view(shape):
+    """compare-medium's meshes: the bake accepts them (Suzanne as Blender makes her is open at the eyes), and they lie
+    within the comparison camera's view of the unit sphere."""
+    from addon.operators import medium_compare
+
+    verts, faces = medium_compare.MESHES[shape]()
+    mesh = bpy.data.meshes.new(shape)
+    mesh.from_pydata(verts, [], faces)
+    assert medium_bake.mesh_problem(bpy.data.objects.new(shape, mesh)) is None
+    assert np.abs(np.asarray(verts)[:, :2]).max() < S.ortho_extent(SPHERE)[0]
+    if shape == "suzanne":
+        monkey = bpy.data.meshes.new("monkey")
+        bm = bmesh.new()
+        bmesh.ops.create_monkey(bm)
+        bm.to_mesh(monkey)
+        bm.free()
+        assert "not closed" in medium_bake.mesh_problem(bpy.data.objects.new("monkey", monkey))
 
 
 def test_the_bake_is_stored_per_mesh_and_goes_stale(tables):

@@ -56,3 +56,10 @@ def test_the_quadrature_is_finite_and_non_negative_at_the_extremes(albedo, g):
     assert np.all(np.isfinite(q)) and q.min() >= 0.0
     assert (q.max() > 0.0) == (albedo > 0.0)
     assert math.isfinite(nm.table_energy(q, SMALL.rho_edges, SMALL.z_edges))
+
+
+def test_the_quadrature_refuses_direction_bins_it_cannot_average():
+    """Each output bin is averaged over its own directions, which assumes equal bins over [0, pi]."""
+    rho, z, theta, phi = _edges(SMALL)
+    with pytest.raises(ValueError, match="theta"):
+        nm.double_table(0.5, 0.0, rho, z, theta ** 1.1, phi)

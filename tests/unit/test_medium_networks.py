@@ -26,7 +26,7 @@ def test_numpy_inference_equals_torch(trained):
     for kind in nm.KINDS:
         net = nm.network(kind, out)
         m = medium_train.load_material(sorted(data.glob("*.npz"))[0], kind)
-        x, _ = medium_train.samples(m)
+        x, _, _ = medium_train.samples(m)
         torch_net = medium_train.make_network(0)
         linears = [layer for layer in torch_net if isinstance(layer, torch.nn.Linear)]
         with torch.no_grad():
