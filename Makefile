@@ -51,17 +51,20 @@ dataset: venv
 train: venv
 	$(PY) -m training.train --data $(DATA) --out addon/bake/weights
 
-# The neural_medium tables: 42 materials (7 albedos x 6 g), about 40 minutes on 2 cores, resumable; and 4 materials
-# between the grid's (albedo, g), only for evaluating the networks off the grid.
+# The neural_medium tables: 56 materials (7 albedos x 8 g), about an hour on 2 cores, resumable; and 4 materials
+# between the grid's albedos, only for evaluating the networks off the grid.
 medium-dataset: venv
 	$(PY) -m training.medium_dataset --out $(MEDIUM_DATA)
 	$(PY) -m training.medium_dataset --out $(MEDIUM_DATA)-off-grid --albedos 0.95 0.995 --gs 0.3 0.7 --seed 2
 
-# The neural_medium networks from that dataset (addon/bake/weights/neural_medium_*.npz, 11.8 KB each), 12 minutes
-# of training each.
+# The neural_medium networks from that dataset (addon/bake/weights/neural_medium_*.npz, 11.8 KB each): 15 minutes of
+# training for the multiple network, 15 for the double one (the bake computes double scattering by quadrature; the
+# network is kept for comparison), half of each material's loss weight in proportion to power.
 medium-networks: venv
-	$(PY) -m training.medium_train --data $(MEDIUM_DATA) --out addon/bake/weights --minutes 12 \
-		--off-grid $(MEDIUM_DATA)-off-grid
+	$(PY) -m training.medium_train --data $(MEDIUM_DATA) --out addon/bake/weights --kinds multiple --minutes 15 \
+		--power-share 0.5 --off-grid $(MEDIUM_DATA)-off-grid
+	$(PY) -m training.medium_train --data $(MEDIUM_DATA) --out addon/bake/weights --kinds double --minutes 15 \
+		--power-share 0.5 --off-grid $(MEDIUM_DATA)-off-grid
 
 # The held-out validation set shipped in tests/data (independent seed, 4x the paths).
 validation-set: venv

@@ -3,8 +3,9 @@ export them for ``addon.reference.neural_medium``.
 
 One network per table (``double``: order 2, ``multiple``: orders >= 3), as the paper: an MLP 6-50-50-1 with tanh,
 inputs (rho, z, theta, phi, albedo, g) in [0, 1] through ``neural_medium.encode`` (each cell paired with its centre
-in the encoded coordinates, each direction bin with its centre), target log(1 + Phi / PHI_0) (``neural_medium.target``:
-the paper's log(1 + Phi) with Phi in units of PHI_0 = 1e-12), L2 loss, Adam (learning rate
+in the encoded coordinates, each direction bin with its centre), target log(1 + Phi / (PHI_0 albedo^k))
+(``neural_medium.target``: the paper's log(1 + Phi) with Phi in units of PHI_0 = 1e-12 and of the lowest order's power
+of the albedo, k = 2 or 3), L2 loss weighted per sample (``--power-share``), Adam (learning rate
 0.01 for multiple and 0.001 for double scattering, the paper's, with cosine decay over the time budget), mini-
 batches of 30 000 samples reshuffled every epoch. 10 % of the samples are held out (the checkpoint with the lowest
 held-out loss is kept); whole materials can be held out too (``--hold-out``), for the off-grid check. Float32
@@ -35,7 +36,7 @@ from addon.reference import neural_medium as nm
 from training.medium_dataset import DEFAULT_CACHE
 from training.train import code_version
 
-HIDDEN = (50, 50)
+HIDDEN = (50, 50)  # the paper's
 LEARNING_RATE = {"double": 1e-3, "multiple": 1e-2}
 BATCH = 30_000
 VALIDATION_SHARE = 0.1
@@ -45,7 +46,7 @@ def load_material(path: Path, kind: str) -> dict:
     """One dataset file: its albedo, g, grid and ``kind`` table."""
     with np.load(path) as f:
         meta = json.loads(str(f["meta"]))
-        return {"name": path.stem, "alpha": float(meta["alpha"]), "g": float(meta["g"]),
+        return {"name": path.stem, "kind": kind, "alpha": float(meta["alpha"]), "g": float(meta["g"]),
                 "table": f[kind].astype(np.float64), "rho_edges": f["rho_edges"], "z_edges": f["z_edges"],
                 "theta": f["theta"], "phi": f["phi"]}
 
@@ -60,13 +61,14 @@ def samples(material: dict, power_share: float = 0.0) -> tuple[np.ndarray, np.nd
     x = nm.encode(*grid, material["alpha"], material["g"])
     power = nm.cell_powers(material["table"], material["rho_edges"], material["z_edges"]).ravel()
     weights = (1.0 - power_share) + power_share * power * (power.size / max(power.sum(), 1e-300))
-    return (x.astype(np.float32), nm.target(material["table"]).ravel().astype(np.float32),
+    y = nm.target(material["table"], albedo=material["alpha"], albedo_power=nm.ALBEDO_POWER[material["kind"]])
+    return (x.astype(np.float32), y.ravel().astype(np.float32),
             weights.astype(np.float32))
 
 
-def make_network(seed: int) -> torch.nn.Sequential:
+def make_network(seed: int, hidden: tuple = HIDDEN) -> torch.nn.Sequential:
     torch.manual_seed(seed)
-    sizes = (6, *HIDDEN, 1)
+    sizes = (6, *hidden, 1)
     modules = []
     for i in range(len(sizes) - 1):
         modules.append(torch.nn.Linear(sizes[i], sizes[i + 1]))
@@ -81,7 +83,15 @@ def to_mlp(net: torch.nn.Sequential, manifest: dict) -> mlp.MLP:
                    tuple(m.bias.detach().numpy().astype(np.float64) for m in linears), manifest)
 
 
-def fit(x: np.ndarray, y: np.ndarray, w: np.ndarray, kind: str, minutes: float, seed: int, log=print) -> tuple:
+@torch.no_grad()
+def weighted_l2(net, x, y, w, chunk: int = 10 * BATCH) -> float:
+    """The weighted loss over a whole set, in chunks (all activations at once would not fit in memory)."""
+    return sum(float(torch.sum(w[s:s + chunk] * (net(x[s:s + chunk])[:, 0] - y[s:s + chunk]) ** 2))
+               for s in range(0, len(x), chunk)) / len(x)
+
+
+def fit(x: np.ndarray, y: np.ndarray, w: np.ndarray, kind: str, minutes: float, seed: int, log=print,
+        hidden: tuple = HIDDEN) -> tuple:
     """Train on (x, y) with loss weights w for about ``minutes``; returns (network with the best held-out loss,
     info)."""
     rng = np.random.default_rng(seed)
@@ -90,7 +100,7 @@ def fit(x: np.ndarray, y: np.ndarray, w: np.ndarray, kind: str, minutes: float, 
     val, train = order[:n_val], order[n_val:]
     xt, yt, wt = torch.from_numpy(x[train]), torch.from_numpy(y[train]), torch.from_numpy(w[train])
     xv, yv, wv = torch.from_numpy(x[val]), torch.from_numpy(y[val]), torch.from_numpy(w[val])
-    net = make_network(seed)
+    net = make_network(seed, hidden)
     opt = torch.optim.Adam(net.parameters(), lr=LEARNING_RATE[kind])
     budget, start = 60.0 * minutes, time.perf_counter()
     best = (math.inf, None)
@@ -108,16 +118,14 @@ def fit(x: np.ndarray, y: np.ndarray, w: np.ndarray, kind: str, minutes: float, 
             loss.backward()
             opt.step()
         epoch += 1
-        with torch.no_grad():
-            val_loss = float(torch.mean(wv * (net(xv)[:, 0] - yv) ** 2))
+        val_loss = weighted_l2(net, xv, yv, wv)
         if val_loss < best[0]:
             best = (val_loss, {k: v.clone() for k, v in net.state_dict().items()})
         log(f"{kind}: epoch {epoch}, held-out weighted L2 {val_loss:.3e} ({time.perf_counter() - start:.0f} s)")
         if time.perf_counter() - start >= budget:
             break
     net.load_state_dict(best[1])
-    with torch.no_grad():
-        train_loss = float(torch.mean(wt * (net(xt)[:, 0] - yt) ** 2))
+    train_loss = weighted_l2(net, xt, yt, wt)
     return net, {"epochs": epoch, "train_l2": train_loss, "held_out_l2": best[0],
                  "seconds": round(time.perf_counter() - start, 1)}
 
@@ -139,16 +147,17 @@ def summary(ratios: dict) -> dict:
 
 
 def train_kind(kind: str, files: list[Path], held_out: set[str], minutes: float, seed: int, out: Path,
-               log=print, off_grid: list[Path] = (), power_share: float = 0.0) -> dict:
+               log=print, off_grid: list[Path] = (), power_share: float = 0.0, hidden: tuple = HIDDEN) -> dict:
     """Train, evaluate and export the ``kind`` network; returns its manifest."""
     materials = [load_material(p, kind) for p in files]
     training = [m for m in materials if m["name"] not in held_out]
     if not training:
         raise SystemExit("no training materials left after --hold-out")
     x, y, w = (np.concatenate(parts) for parts in zip(*(samples(m, power_share) for m in training)))
-    net, info = fit(x, y, w, kind, minutes, seed, log)
+    net, info = fit(x, y, w, kind, minutes, seed, log, hidden)
     manifest = {"network": f"neural_medium {kind}", "activation": "tanh", "encoding": nm.ENCODING,
-                "target": "log(1 + Phi / phi_0)", "phi_0": nm.PHI_0, "layers": [6, *HIDDEN, 1],
+                "target": "log(1 + Phi / (phi_0 albedo^albedo_power))", "phi_0": nm.PHI_0,
+                "albedo_power": nm.ALBEDO_POWER[kind], "layers": [6, *hidden, 1],
                 "data": {"materials": [m["name"] for m in training], "samples": int(len(x))},
                 "seed": seed, "minutes": minutes, "power_share": power_share, **info,
                 "date": datetime.date.today().isoformat(), "code_version": code_version()}
@@ -181,6 +190,8 @@ def main(argv=None) -> int:
     ap.add_argument("--power-share", type=float, default=0.0,
                     help="share of each material's loss weight given in proportion to the power a sample emits "
                          "(0: every cell and direction alike, the paper's)")
+    ap.add_argument("--hidden", type=int, nargs="+", default=list(HIDDEN),
+                    help="hidden layer widths (default: the paper's 50 50)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quick", action="store_true", help="a few seconds per network, for tests")
     a = ap.parse_args(argv)
@@ -196,7 +207,7 @@ def main(argv=None) -> int:
         raise SystemExit(f"--off-grid: no dataset files in {a.off_grid}")
     for kind in a.kinds:
         train_kind(kind, files, set(a.hold_out), 0.05 if a.quick else a.minutes, a.seed, a.out, off_grid=off_grid,
-                   power_share=a.power_share)
+                   power_share=a.power_share, hidden=tuple(a.hidden))
     return 0
 
 

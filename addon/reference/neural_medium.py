@@ -32,6 +32,7 @@ ALBEDO_MAX = 0.999
 
 # Encoding version 1: the sinh map of the training grid (training.medium_tracer.sinh_edges) and its extents.
 PHI_0 = 1e-12  # the unit of Phi in the networks' target (``target``)
+ALBEDO_POWER = {"double": 2, "multiple": 3}  # the lowest order's power of the albedo, divided out of the target
 ENCODING = {"version": 1, "scale": 1.0, "rho_max": 256.0, "z_max": 256.0, "albedo_max": ALBEDO_MAX}
 
 
@@ -61,19 +62,24 @@ def encode(rho, z, theta, phi, albedo, g, encoding: dict = ENCODING) -> np.ndarr
     return np.stack([c.ravel() for c in np.broadcast_arrays(*columns)], axis=1)
 
 
-def target(phi_values, phi_0: float = None) -> np.ndarray:
-    """What the networks learn: log(1 + Phi / PHI_0). The paper's log(1 + Phi) with Phi in units of PHI_0: in Lamina's
-    units (per unit source power, per mfp^3) Phi spans 1e-16 to 100 and mostly lies far below 1, where log(1 + Phi)
-    would be Phi itself and a network's absolute error a huge relative one (the energy of the far cells, whose volumes
-    reach 1e5 mfp^3, would be wrong by orders of magnitude)."""
-    return np.log1p(np.maximum(np.asarray(phi_values, dtype=np.float64), 0.0) / (PHI_0 if phi_0 is None else phi_0))
+def target(phi_values, phi_0: float = PHI_0, albedo: float = 1.0, albedo_power: int = 0) -> np.ndarray:
+    """What the networks learn: log(1 + Phi / (PHI_0 albedo^k)), k = ``ALBEDO_POWER`` of the table (the paper's
+    log(1 + Phi), k = 0, with Phi in units of PHI_0). In Lamina's units (per unit source power, per mfp^3) Phi spans
+    1e-16 to 100 and mostly lies far below 1, where log(1 + Phi) would be Phi itself and a network's absolute error a
+    huge relative one (the energy of the far cells, whose volumes reach 1e5 mfp^3, would be wrong by orders of
+    magnitude). Order n carries albedo^n exactly, so albedo^k takes out the steepest change between the grid's low
+    albedos (0.05 and 0.3 lie close in the albedo's encoding, and their multiple scattering differs 200-fold)."""
+    scale = phi_0 * float(albedo) ** albedo_power
+    return np.log1p(np.maximum(np.asarray(phi_values, dtype=np.float64), 0.0) / scale)
 
 
 def predict(net: mlp.MLP, rho, z, theta, phi, albedo, g) -> np.ndarray:
     """Phi at the given points, directions and materials (flattened broadcast), non-negative (``target``'s inverse,
-    with the PHI_0 of the network's manifest)."""
-    x = encode(rho, z, theta, phi, albedo, g, net.manifest.get("encoding", ENCODING))
-    return np.maximum(np.expm1(net(x)[:, 0]), 0.0) * net.manifest.get("phi_0", 1.0)
+    with the PHI_0 and the albedo's power of the network's manifest)."""
+    m = net.manifest
+    x = encode(rho, z, theta, phi, albedo, g, m.get("encoding", ENCODING))
+    a = np.clip(np.broadcast_arrays(rho, z, theta, phi, np.asarray(albedo, dtype=np.float64), g)[4].ravel(), 0.0, 1.0)
+    return np.maximum(np.expm1(net(x)[:, 0]), 0.0) * m.get("phi_0", 1.0) * a ** m.get("albedo_power", 0)
 
 
 def cell_centres(rho_edges, z_edges, encoding: dict = ENCODING) -> tuple[np.ndarray, np.ndarray]:

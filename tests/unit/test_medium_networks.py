@@ -37,6 +37,18 @@ def test_numpy_inference_equals_torch(trained):
         np.testing.assert_allclose(net(x)[:, 0], expected, rtol=1e-5, atol=1e-5)
 
 
+def test_the_loss_weights_share_each_material_between_power_and_cells(trained):
+    """--power-share s: weights average 1 per material, (1 - s) of it uniform and s in proportion to the power a cell
+    and direction emit (the energy ratio's and a render's weighting)."""
+    data, _ = trained
+    m = medium_train.load_material(sorted(data.glob("*.npz"))[0], "multiple")
+    power = nm.cell_powers(m["table"], m["rho_edges"], m["z_edges"]).ravel()
+    for share in (0.0, 0.5, 1.0):
+        _, y, w = medium_train.samples(m, share)
+        assert w.mean() == pytest.approx(1.0, rel=1e-5) and len(w) == len(y) == power.size
+        np.testing.assert_allclose(w, (1.0 - share) + share * power / power.mean(), rtol=1e-5)
+
+
 def test_the_weights_are_the_papers_size_and_say_how_they_were_made(trained):
     _, out = trained
     for kind in nm.KINDS:
@@ -44,11 +56,25 @@ def test_the_weights_are_the_papers_size_and_say_how_they_were_made(trained):
         assert [w.shape for w in net.weights] == [(6, 50), (50, 50), (50, 1)]
         assert 4 * sum(w.size + b.size for w, b in zip(net.weights, net.biases)) <= 12 * 1024  # float32, 11.8 KB
         m = net.manifest
-        assert m["activation"] == "tanh" and m["encoding"] == nm.ENCODING and m["target"] == "log(1 + Phi / phi_0)"
-        assert m["phi_0"] == nm.PHI_0
+        assert m["activation"] == "tanh" and m["encoding"] == nm.ENCODING
+        assert m["target"] == "log(1 + Phi / (phi_0 albedo^albedo_power))"
+        assert m["phi_0"] == nm.PHI_0 and m["albedo_power"] == nm.ALBEDO_POWER[kind]
         assert m["data"]["materials"] == ["a0.7000_g+0.000", "a0.7000_g+0.600", "a0.9500_g+0.000"]
         assert set(m["energy_ratio"]["held_out"]["per_material"]) == {"a0.9500_g+0.600"}
         assert all(math.isfinite(v) for v in m["energy_ratio"]["training"]["per_material"].values())
+
+
+@pytest.mark.parametrize("power", [0, 3])
+def test_the_prediction_inverts_the_target_through_the_albedos_power(power):
+    """A network that outputs the target of Phi for one albedo predicts Phi there; the albedo's power in the manifest
+    scales the prediction as albedo^k (k = 0: the paper's target), so albedo 0 predicts nothing for k > 0."""
+    phi, albedo = 3.0e-5, 0.3
+    y = float(nm.target(phi, albedo=albedo, albedo_power=power))
+    net = mlp.MLP((np.zeros((6, 1)),), (np.array([y]),), {"activation": "tanh", "phi_0": nm.PHI_0,
+                                                          "albedo_power": power})
+    assert nm.predict(net, 1.0, 0.0, 0.5, 0.5, albedo, 0.0)[0] == pytest.approx(phi, rel=1e-9)
+    assert nm.predict(net, 1.0, 0.0, 0.5, 0.5, 2 * albedo, 0.0)[0] == pytest.approx(phi * 2 ** power, rel=1e-9)
+    assert (nm.predict(net, 1.0, 0.0, 0.5, 0.5, 0.0, 0.0)[0] == 0.0) == (power > 0)
 
 
 def test_tanh_networks_differ_from_silu_ones():
@@ -96,13 +122,18 @@ def test_unknown_network_and_missing_weights_are_clear(tmp_path):
 # ------------------------------------------------------------------------------------------ the shipped networks
 
 def test_the_shipped_networks_are_the_papers_size_and_trained_on_the_whole_grid():
+    """The multiple network (the bake's) saw the dataset's whole default grid; the double network, kept for
+    comparison, the grid of its time (42 materials, before g = 0.3 and 0.7 were added)."""
+    grid = {f"a{a:.4f}_g{g:+.3f}" for a in medium_dataset.ALBEDOS for g in medium_dataset.GS}
     total = 0
     for kind in nm.KINDS:
         net = nm.network(kind)
         total += sum(np.asarray(w, np.float32).nbytes + np.asarray(b, np.float32).nbytes
                      for w, b in zip(net.weights, net.biases))
         m = net.manifest
-        assert len(m["data"]["materials"]) == 42 and m["activation"] == "tanh"
+        materials = set(m["data"]["materials"])
+        assert (materials == grid) if kind == "multiple" else (materials < grid and len(materials) == 42)
+        assert m["activation"] == "tanh"
         assert {"rho_edges", "z_edges", "theta", "phi"} <= set(m["grid"])
         assert m["energy_ratio"]["off_grid"]["per_material"]  # evaluated off the grid too
     assert total <= 24 * 1024  # the paper's two networks: 11.8 KB each
