@@ -36,7 +36,7 @@ from addon.reference import neural_medium as nm
 from training.medium_dataset import DEFAULT_CACHE
 from training.train import code_version
 
-HIDDEN = (50, 50)  # the paper's
+HIDDEN = (50, 50)
 LEARNING_RATE = {"double": 1e-3, "multiple": 1e-2}
 BATCH = 30_000
 VALIDATION_SHARE = 0.1
@@ -52,7 +52,7 @@ def load_material(path: Path, kind: str) -> dict:
 
 
 def samples(material: dict, power_share: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(inputs (N, 6), targets log(1 + Phi / PHI_0) (N,), loss weights (N,)) of every cell and direction bin of a
+    """(inputs (N, 6), targets ``nm.target`` (N,), loss weights (N,)) of every cell and direction bin of a
     material's table. The weights average 1 over the material: a share ``power_share`` of them goes to the samples
     in proportion to the power they emit (cell volume x bin solid angle x Phi, what the energy ratio and a render
     integrate), the rest uniformly."""
@@ -66,9 +66,9 @@ def samples(material: dict, power_share: float = 0.0) -> tuple[np.ndarray, np.nd
             weights.astype(np.float32))
 
 
-def make_network(seed: int, hidden: tuple = HIDDEN) -> torch.nn.Sequential:
+def make_network(seed: int) -> torch.nn.Sequential:
     torch.manual_seed(seed)
-    sizes = (6, *hidden, 1)
+    sizes = (6, *HIDDEN, 1)
     modules = []
     for i in range(len(sizes) - 1):
         modules.append(torch.nn.Linear(sizes[i], sizes[i + 1]))
@@ -90,8 +90,7 @@ def weighted_l2(net, x, y, w, chunk: int = 10 * BATCH) -> float:
                for s in range(0, len(x), chunk)) / len(x)
 
 
-def fit(x: np.ndarray, y: np.ndarray, w: np.ndarray, kind: str, minutes: float, seed: int, log=print,
-        hidden: tuple = HIDDEN) -> tuple:
+def fit(x: np.ndarray, y: np.ndarray, w: np.ndarray, kind: str, minutes: float, seed: int, log=print) -> tuple:
     """Train on (x, y) with loss weights w for about ``minutes``; returns (network with the best held-out loss,
     info)."""
     rng = np.random.default_rng(seed)
@@ -100,7 +99,7 @@ def fit(x: np.ndarray, y: np.ndarray, w: np.ndarray, kind: str, minutes: float, 
     val, train = order[:n_val], order[n_val:]
     xt, yt, wt = torch.from_numpy(x[train]), torch.from_numpy(y[train]), torch.from_numpy(w[train])
     xv, yv, wv = torch.from_numpy(x[val]), torch.from_numpy(y[val]), torch.from_numpy(w[val])
-    net = make_network(seed, hidden)
+    net = make_network(seed)
     opt = torch.optim.Adam(net.parameters(), lr=LEARNING_RATE[kind])
     budget, start = 60.0 * minutes, time.perf_counter()
     best = (math.inf, None)
@@ -147,17 +146,17 @@ def summary(ratios: dict) -> dict:
 
 
 def train_kind(kind: str, files: list[Path], held_out: set[str], minutes: float, seed: int, out: Path,
-               log=print, off_grid: list[Path] = (), power_share: float = 0.0, hidden: tuple = HIDDEN) -> dict:
+               log=print, off_grid: list[Path] = (), power_share: float = 0.0) -> dict:
     """Train, evaluate and export the ``kind`` network; returns its manifest."""
     materials = [load_material(p, kind) for p in files]
     training = [m for m in materials if m["name"] not in held_out]
     if not training:
         raise SystemExit("no training materials left after --hold-out")
     x, y, w = (np.concatenate(parts) for parts in zip(*(samples(m, power_share) for m in training)))
-    net, info = fit(x, y, w, kind, minutes, seed, log, hidden)
+    net, info = fit(x, y, w, kind, minutes, seed, log)
     manifest = {"network": f"neural_medium {kind}", "activation": "tanh", "encoding": nm.ENCODING,
                 "target": "log(1 + Phi / (phi_0 albedo^albedo_power))", "phi_0": nm.PHI_0,
-                "albedo_power": nm.ALBEDO_POWER[kind], "layers": [6, *hidden, 1],
+                "albedo_power": nm.ALBEDO_POWER[kind], "layers": [6, *HIDDEN, 1],
                 "data": {"materials": [m["name"] for m in training], "samples": int(len(x))},
                 "seed": seed, "minutes": minutes, "power_share": power_share, **info,
                 "date": datetime.date.today().isoformat(), "code_version": code_version()}
@@ -190,8 +189,6 @@ def main(argv=None) -> int:
     ap.add_argument("--power-share", type=float, default=0.0,
                     help="share of each material's loss weight given in proportion to the power a sample emits "
                          "(0: every cell and direction alike, the paper's)")
-    ap.add_argument("--hidden", type=int, nargs="+", default=list(HIDDEN),
-                    help="hidden layer widths (default: the paper's 50 50)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quick", action="store_true", help="a few seconds per network, for tests")
     a = ap.parse_args(argv)
@@ -207,7 +204,7 @@ def main(argv=None) -> int:
         raise SystemExit(f"--off-grid: no dataset files in {a.off_grid}")
     for kind in a.kinds:
         train_kind(kind, files, set(a.hold_out), 0.05 if a.quick else a.minutes, a.seed, a.out, off_grid=off_grid,
-                   power_share=a.power_share, hidden=tuple(a.hidden))
+                   power_share=a.power_share)
     return 0
 
 
