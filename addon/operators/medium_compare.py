@@ -2,9 +2,9 @@
 volumetric path tracing, and Cycles' random-walk subsurface scattering of the same medium (a Principled BSDF,
 ``nodes/subsurface_np.py``: what an artist would use instead of a volume), each with its render time and its error against Cycles' full path tracing (the external
 truth) and, for the shapes it renders (sphere, box), the numpy ground truth (``reference/neural_medium_truth.py``,
-all orders). Shapes: the comparison sphere, a box (a thick tile: thin parts at its edges) and a torus (closed, not
-convex) and Suzanne (her head, eye sockets closed: thin ears, a mesh as an artist has one). Shared by ``lamina compare-medium`` (pictures and report.json) and the bench. The user's scene is
-untouched: everything renders in ``cycles_render``'s temporary scene (its mesh replaced for the other shapes),
+all orders). Shapes: the comparison sphere, a box (a thick tile: thin parts at its edges), a torus (closed, not
+convex) and Suzanne (her head, eye sockets closed: thin ears, a mesh as an artist has one). Shared by ``lamina
+compare-medium`` (pictures and report.json) and the bench. The user's scene is untouched: everything renders in ``cycles_render``'s temporary scene (its mesh replaced for the other shapes),
 whose sun the bake uses.
 """
 from __future__ import annotations

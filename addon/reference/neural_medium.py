@@ -2,12 +2,13 @@
 per-material table reconstruction (Sec. 3.7).
 
 Two networks, ``double`` and ``multiple``, each an MLP 6-50-50-1 with tanh (Sec. 3.5; ``bake.mlp``), predict
-log(1 + Phi / PHI_0) of the tables that ``training/medium_tracer.py`` defines: Phi(rho, z, theta, phi; albedo, g), the
-radiance emitted per unit volume into direction (theta, phi) at the point (rho, z) by the double (order 2) or
+log(1 + Phi / (PHI_0 albedo^k)) of the tables that ``training/medium_tracer.py`` defines: Phi(rho, z, theta, phi;
+albedo, g), the radiance emitted per unit volume into direction (theta, phi) at the point (rho, z) by the double (order 2) or
 multiple (orders >= 3) scattering of a unit point-directional source along +z in an infinite medium, lengths in
 mean free paths (sigma_t = 1), directions in the point's local frame (theta from +z, phi from the radial direction,
-folded to [0, pi]). Reconstruction: Phi = max(exp(network) - 1, 0). Double scattering also has a closed form as a
-1-D integral along the beam (``double_table``), which the bake uses instead of the double network.
+folded to [0, pi]). Reconstruction: Phi = max(exp(network) - 1, 0) PHI_0 albedo^k (``target``). Double scattering
+also has a closed form as a 1-D integral along the beam (``double_table``), which the bake uses instead of the double
+network.
 
 Inputs reach the networks in [0, 1] through ``encode``, whose constants travel in each weights file's manifest
 (``encoding``): rho and z through the same sinh map as the training grid (uniform near the source, geometric far
