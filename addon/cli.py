@@ -130,6 +130,10 @@ def build_parser() -> argparse.ArgumentParser:
     bm.add_argument("--steps", type=int, default=12, help="quadrature points along each gathering ray")
     bm.add_argument("--spacing", type=float, default=0.5, help="surface points closer than this many mean free "
                                                                "paths share one gather (0: every vertex gathers)")
+    bm.add_argument("--grid-angle", type=float, default=0.0,
+                    help="gather a cube of beams through one representative beam where it is seen under less than "
+                         "this angle in radians (the paper's VRL grid; 0: every beam)")
+    bm.add_argument("--grid-cube", type=float, default=1.0, help="the VRL grid's cube side in mean free paths")
     _blend_output_args(bm)
 
     cm = sub.add_parser("compare-medium", help="render a neural medium on the comparison sphere: Cycles single "
@@ -446,7 +450,8 @@ def cmd_bake_medium(args) -> int:
 
     data = _medium_dict(args)
     try:
-        settings = nb.Settings(args.cells, args.steps, spacing=args.spacing)
+        settings = nb.Settings(args.cells, args.steps, spacing=args.spacing, grid_angle=args.grid_angle,
+                               grid_cube=args.grid_cube)
     except ValueError as e:
         raise CliError(str(e)) from None
     blend, out = _blend_paths(args)

@@ -51,15 +51,18 @@ def load_material(path: Path, kind: str) -> dict:
                 "theta": f["theta"], "phi": f["phi"]}
 
 
-def samples(material: dict, power_share: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def samples(material: dict, power_share: float = 0.0, power_range: float = math.inf
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(inputs (N, 6), targets ``nm.target`` (N,), loss weights (N,)) of every cell and direction bin of a
     material's table. The weights average 1 over the material: a share ``power_share`` of them goes to the samples
-    in proportion to the power they emit (cell volume x bin solid angle x Phi, what the energy ratio and a render
-    integrate), the rest uniformly."""
+    in proportion to the power they emit (cell volume x bin solid angle x Phi, what the energy ratio integrates)
+    times exp(-r / ``power_range``) at the cell centre's distance r (mfp) from the source (what a render of an object
+    a few ``power_range`` across sees: its surface lies within that reach of the beams), the rest uniformly."""
     rho_c, z_c = nm.cell_centres(material["rho_edges"], material["z_edges"])
     grid = np.meshgrid(rho_c, z_c, material["theta"], material["phi"], indexing="ij")
     x = nm.encode(*grid, material["alpha"], material["g"])
-    power = nm.cell_powers(material["table"], material["rho_edges"], material["z_edges"]).ravel()
+    reach = np.exp(-np.hypot(grid[0], grid[1]) / power_range)
+    power = (nm.cell_powers(material["table"], material["rho_edges"], material["z_edges"]) * reach).ravel()
     weights = (1.0 - power_share) + power_share * power * (power.size / max(power.sum(), 1e-300))
     y = nm.target(material["table"], albedo=material["alpha"], albedo_power=nm.ALBEDO_POWER[material["kind"]])
     return (x.astype(np.float32), y.ravel().astype(np.float32),
@@ -146,19 +149,20 @@ def summary(ratios: dict) -> dict:
 
 
 def train_kind(kind: str, files: list[Path], held_out: set[str], minutes: float, seed: int, out: Path,
-               log=print, off_grid: list[Path] = (), power_share: float = 0.0) -> dict:
+               log=print, off_grid: list[Path] = (), power_share: float = 0.0, power_range: float = math.inf) -> dict:
     """Train, evaluate and export the ``kind`` network; returns its manifest."""
     materials = [load_material(p, kind) for p in files]
     training = [m for m in materials if m["name"] not in held_out]
     if not training:
         raise SystemExit("no training materials left after --hold-out")
-    x, y, w = (np.concatenate(parts) for parts in zip(*(samples(m, power_share) for m in training)))
+    x, y, w = (np.concatenate(parts) for parts in zip(*(samples(m, power_share, power_range) for m in training)))
     net, info = fit(x, y, w, kind, minutes, seed, log)
     manifest = {"network": f"neural_medium {kind}", "activation": "tanh", "encoding": nm.ENCODING,
                 "target": "log(1 + Phi / (phi_0 albedo^albedo_power))", "phi_0": nm.PHI_0,
                 "albedo_power": nm.ALBEDO_POWER[kind], "layers": [6, *HIDDEN, 1],
                 "data": {"materials": [m["name"] for m in training], "samples": int(len(x))},
-                "seed": seed, "minutes": minutes, "power_share": power_share, **info,
+                "seed": seed, "minutes": minutes, "power_share": power_share,
+                "power_range": power_range if math.isfinite(power_range) else None, **info,
                 "date": datetime.date.today().isoformat(), "code_version": code_version()}
     model = to_mlp(net, manifest)
     manifest["grid"] = {k: np.asarray(training[0][k]).tolist() for k in ("rho_edges", "z_edges", "theta", "phi")}
@@ -189,6 +193,9 @@ def main(argv=None) -> int:
     ap.add_argument("--power-share", type=float, default=0.0,
                     help="share of each material's loss weight given in proportion to the power a sample emits "
                          "(0: every cell and direction alike, the paper's)")
+    ap.add_argument("--power-range", type=float, default=math.inf,
+                    help="the power weights fall as exp(-r / RANGE) with the distance r (mfp) from the source "
+                         "(default: no fall-off)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quick", action="store_true", help="a few seconds per network, for tests")
     a = ap.parse_args(argv)
@@ -204,7 +211,7 @@ def main(argv=None) -> int:
         raise SystemExit(f"--off-grid: no dataset files in {a.off_grid}")
     for kind in a.kinds:
         train_kind(kind, files, set(a.hold_out), 0.05 if a.quick else a.minutes, a.seed, a.out, off_grid=off_grid,
-                   power_share=a.power_share)
+                   power_share=a.power_share, power_range=a.power_range)
     return 0
 
 

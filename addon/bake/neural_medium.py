@@ -43,17 +43,30 @@ class Settings:
     """Bake resolution: beams per lamp side (``cells`` x ``cells`` beams), quadrature points along each ray;
     ``boundary``: multiple scattering with the boundary's image sources (``reference.neural_medium.gather``'s
     ``images``), or the paper's infinite medium; ``spacing``: how close (in the medium's smallest mean free path)
-    surface points may be and share one gather (``gathering_points``, ``spread``; 0: every point gathers)."""
+    surface points may be and share one gather (``gathering_points``, ``spread``; 0: every point gathers);
+    ``grid_angle``, ``grid_cube``: the paper's grid of representative beams (``reference.neural_medium.beam_grid``,
+    cubes of ``grid_cube`` mean free paths taken whole where seen under less than ``grid_angle`` radians; 0: every
+    beam)."""
 
     cells: int = 16
     steps: int = 12
     boundary: bool = True
     spacing: float = 0.5
+    grid_angle: float = 0.0
+    grid_cube: float = 1.0
 
     def __post_init__(self):
-        if not (1 <= self.cells <= 256 and 1 <= self.steps <= 256 and 0.0 <= self.spacing <= 16.0):
+        if not (1 <= self.cells <= 256 and 1 <= self.steps <= 256 and 0.0 <= self.spacing <= 16.0
+                and 0.0 <= self.grid_angle <= math.pi and 0.01 <= self.grid_cube <= 64.0):
             raise ValueError(f"bake settings out of range: cells {self.cells} (1-256), steps {self.steps} (1-256), "
-                             f"spacing {self.spacing} (0-16 mean free paths)")
+                             f"spacing {self.spacing} (0-16 mean free paths), grid angle {self.grid_angle} (0-pi), "
+                             f"grid cube {self.grid_cube} (0.01-64 mean free paths)")
+
+    def key(self) -> tuple:
+        """What of the settings a bake depends on: the grid's only where it is on (a bake without it keeps the key it
+        had before the grid existed)."""
+        base = (self.cells, self.steps, self.boundary, self.spacing)
+        return base if self.grid_angle == 0.0 else base + (self.grid_angle, self.grid_cube)
 
 
 def reconstruction_grid(net) -> tuple:
@@ -135,8 +148,10 @@ def bake_points(p, tables: list[dict], shape, beams: list, points, normals, sett
                 progress((c + done / max(total, 1)) / 3.0)
 
         images = nm.boundary(p.albedo[c], p.g) if settings.boundary else None
+        grid = (nm.beam_grid(beams[c], settings.grid_cube * p.mean_free_path[c], settings.grid_angle)
+                if settings.grid_angle > 0.0 and len(beams[c]) else None)
         radiance = nm.gather(tables[c], p.mean_free_path[c], shape, beams[c], origins, inward, steps=settings.steps,
-                             progress=report, images=images)
+                             progress=report, images=images, grid=grid)
         values = sum(radiance[kind] for kind in nm.KINDS).reshape(len(points), DIRECTIONS)
         out[:, :, c] = fit_linear(directions, values)
     return out
@@ -205,7 +220,7 @@ def bake_key(params: dict, mesh_digest: str, lamps: list, settings: Settings, we
     networks' version, numbers to 5 significant digits (a value read back from a float32 socket is the same value).
     A changed key means the stored bake is stale."""
     key = json.dumps({"version": VERSION, "params": _rounded(params), "mesh": mesh_digest, "lamps": _rounded(lamps),
-                      "settings": dataclasses.astuple(settings), "weights": weights},
+                      "settings": settings.key(), "weights": weights},
                      sort_keys=True)
     return hashlib.sha256(key.encode()).hexdigest()[:16]
 

@@ -71,7 +71,6 @@ def spacing_rows(points: int = 3000, spacings=(0.25, 0.5, 1.0, 2.0), large: int 
     (``bake.neural_medium.gathering_points``, ``spread``) against gathering at every point: ``points`` on the unit
     sphere (a Fibonacci lattice), the scene's sun, the bake's tables, the radiance along the normal; and the time
     of a bake of ``large`` points at the default spacing. Grey media (the green channel's albedo)."""
-    import math
     import time
 
     import numpy as np
@@ -79,12 +78,6 @@ def spacing_rows(points: int = 3000, spacings=(0.25, 0.5, 1.0, 2.0), large: int 
     from ..bake import neural_medium as nb
     from ..reference import neural_medium_truth as truth
     from ..reference import scenes as S
-
-    def lattice(n):
-        i = np.arange(n) + 0.5
-        z = 1.0 - 2.0 * i / n
-        r, phi = np.sqrt(1.0 - z * z), math.pi * (1.0 + 5 ** 0.5) * i
-        return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
     def bake(p, tables, x, settings):
         start = time.perf_counter()
@@ -98,7 +91,7 @@ def spacing_rows(points: int = 3000, spacings=(0.25, 0.5, 1.0, 2.0), large: int 
     for name, scale in (("cloud", 0.5), ("milk", 0.25)):
         p = model.params_from_dict({**presets.load(MODEL, name), "scale": scale})
         p = model.params_from_dict({**p.to_dict(), "sigma_s": [p.sigma_s[1]] * 3, "sigma_a": [p.sigma_a[1]] * 3})
-        tables, x = nb.channel_tables(p), lattice(points)
+        tables, x = nb.channel_tables(p), _lattice(points)
         full, _, full_seconds = bake(p, tables, x, nb.Settings(spacing=0.0))
         ref = nb.evaluate(full, x)[:, 1]
         row = {"label": f"{name} ×{scale:g}", "mfp": p.mean_free_path[1], "points": points,
@@ -109,10 +102,111 @@ def spacing_rows(points: int = 3000, spacings=(0.25, 0.5, 1.0, 2.0), large: int 
             row["spacings"].append({"spacing": spacing, "gathered": gathered, "seconds": seconds,
                                     "mean": float(got.mean() / ref.mean() - 1.0),
                                     "rel_rmse": float(np.sqrt(np.mean((got - ref) ** 2)) / ref.mean())})
-        _, gathered, seconds = bake(p, tables, lattice(large), nb.Settings())
+        _, gathered, seconds = bake(p, tables, _lattice(large), nb.Settings())
         row["large"] = {"points": large, "gathered": gathered, "seconds": seconds, "beams": len(beams[1])}
         rows.append(row)
     return rows
+
+
+GRID_SETTINGS = ((0.5, 1.0), (1.0, 1.0), (1.0, 2.0))  # (angle in radians, cube side in mfp) of the VRL grid
+
+
+@lru_cache(maxsize=1)
+def grid_rows(points: int = 1200, cells: int = 32) -> list[dict]:
+    """The paper's grid of representative beams (``reference.neural_medium.beam_grid``) against every beam: the
+    bake's tables and boundary images, ``points`` on the unit sphere (a Fibonacci lattice) gathering along the
+    normal, the scene's sun as ``cells`` x ``cells`` beams; grey media (the green channel)."""
+    import time
+
+    import numpy as np
+
+    from ..bake import neural_medium as nb
+    from ..reference import neural_medium_truth as truth
+    from ..reference import scenes as S
+
+    x = _lattice(points)
+    beams = nm.sun_beams(truth.Sphere(), S.sphere_scene().suns[0], cells)
+    rows = []
+    for name, scale in (("milk", 0.25), ("milk", 0.05)):
+        p = model.params_from_dict({**presets.load(MODEL, name), "scale": scale})
+        tables, ell = nb.channel_tables(p)[1], p.mean_free_path[1]
+
+        def run(grid):
+            start = time.perf_counter()
+            g = nm.gather(tables, ell, truth.Sphere(), beams, x * (1.0 + 1e-4), -x, steps=nb.Settings.steps,
+                          images=nm.boundary(p.albedo[1], p.g), grid=grid)
+            return g["double"] + g["multiple"], time.perf_counter() - start
+
+        every, seconds = run(None)
+        row = {"label": f"{name} ×{scale:g}", "across": 2.0 / ell, "beams": len(beams), "seconds": seconds,
+               "grids": []}
+        for angle, cube in GRID_SETTINGS:
+            got, t = run(nm.beam_grid(beams, cube * ell, angle))
+            row["grids"].append({"angle": angle, "cube": cube, "seconds": t,
+                                 "mean": float(got.mean() / every.mean() - 1),
+                                 "rel_rmse": float(np.sqrt(np.mean((got - every) ** 2)) / every.mean())})
+        rows.append(row)
+    return rows
+
+
+@lru_cache(maxsize=1)
+def segment_rows(points: int = 1200, cells: int = 16) -> list[dict]:
+    """The paper's accumulated segments (``reference.neural_medium.segment_table`` with Eq. 5's weight) against the
+    bake's quadrature along each camera segment: ``points`` on the unit sphere gathering along the normal, the
+    scene's sun as ``cells`` x ``cells`` beams, the bake's tables and images; grey media (the green channel)."""
+    import time
+
+    import numpy as np
+
+    from ..bake import neural_medium as nb
+    from ..reference import neural_medium_truth as truth
+    from ..reference import scenes as S
+
+    x = _lattice(points)
+    beams = nm.sun_beams(truth.Sphere(), S.sphere_scene().suns[0], cells)
+    rows = []
+    for name, scale in (("cloud", 0.5), ("milk", 0.25), ("milk", 0.05)):
+        p = model.params_from_dict({**presets.load(MODEL, name), "scale": scale})
+        tables, ell = nb.channel_tables(p)[1], p.mean_free_path[1]
+        start = time.perf_counter()
+        segments = {kind: nm.segment_table(t) for kind, t in tables.items()}
+        build = time.perf_counter() - start
+        timed = []
+        for t in (tables, segments):
+            start = time.perf_counter()
+            g = nm.gather(t, ell, truth.Sphere(), beams, x * (1.0 + 1e-4), -x, steps=nb.Settings.steps,
+                          images=nm.boundary(p.albedo[1], p.g))
+            timed.append((g["double"] + g["multiple"], time.perf_counter() - start))
+        (exact, seconds), (got, segment_seconds) = timed
+        rows.append({"label": f"{name} ×{scale:g}", "across": 2.0 / ell, "seconds": seconds,
+                     "segment_seconds": segment_seconds, "build": build,
+                     "mean": float(got.mean() / exact.mean() - 1.0),
+                     "rel_rmse": float(np.sqrt(np.mean((got - exact) ** 2)) / exact.mean())})
+    return rows
+
+
+def _lattice(n: int):
+    """``n`` points of a Fibonacci lattice on the unit sphere."""
+    import math
+
+    import numpy as np
+
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    r, phi = np.sqrt(1.0 - z * z), math.pi * (1.0 + 5 ** 0.5) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+def grid_lines() -> list[str]:
+    lines = ["| medium (scale) | mfp across | beams | grid: angle, cube | time | speed-up | mean | rel. RMSE |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in grid_rows():
+        lines.append(f"| {r['label']} | {r['across']:.1f} | {r['beams']} | off (every beam) | {r['seconds']:.1f} s | "
+                     "1× | — | — |")
+        lines += [f"| {r['label']} | {r['across']:.1f} | {r['beams']} | {g['angle']:g} rad, {g['cube']:g} mfp | "
+                  f"{g['seconds']:.1f} s | {r['seconds'] / g['seconds']:.1f}× | {g['mean']:+.1%} | "
+                  f"{pct(g['rel_rmse'])} |" for g in r["grids"]]
+    return lines
 
 
 def network_lines() -> list[str]:
@@ -177,6 +271,21 @@ def accuracy(sizes) -> str:
                    f"— | — |")
         out += [f"| {r['label']} | {r['mfp']:.3f} | {step['spacing']:g} | {step['gathered']} | "
                 f"{step['seconds']:.1f} s | {step['mean']:+.1%} | {pct(step['rel_rmse'])} |" for step in r["spacings"]]
+    out += ["", "The paper's grid of representative beams (Sec. 4.3, one level; `bake-medium --grid-angle`, off by "
+                "default): beams sorted into cubes, a cube seen from a chunk of gathering rays under less than the "
+                "angle gathered through one beam of its summed power at its members' mean entry and direction "
+                "(their images' means for the boundary), the rays ordered along a Z curve so that a chunk is "
+                "compact. Against every beam (numpy, a 1200-point unit sphere gathering along the normal, the sun "
+                "as 32 × 32 beams, the bake's tables and images):", "", *grid_lines(),
+            "", "The paper's accumulated camera segments (Sec. 3.7: each table integrated along 5 mean free paths "
+                "of camera ray, `reference.neural_medium.segment_table`, looked up once where a camera segment "
+                "enters and scaled by Eq. 5's weight, read as (1 − e^−τ) / (1 − e^−5) for a segment τ mean free "
+                "paths long) against the bake's quadrature along the segment (12 points; numpy, a 1200-point unit "
+                "sphere gathering along the normal, 16 × 16 beams of the sun):", "",
+            "| medium (scale) | mfp across | quadrature | segment tables: build, gather | mean | rel. RMSE |",
+            "|---|---|---|---|---|---|",
+            *[f"| {r['label']} | {r['across']:.1f} | {r['seconds']:.1f} s | {r['build']:.1f} s, "
+              f"{r['segment_seconds']:.1f} s | {r['mean']:+.1%} | {pct(r['rel_rmse'])} |" for r in segment_rows()]]
     notes = sorted({f"{r['label']}: {n}" for r in rows for n in r["subsurface_notes"]})
     out += ["", "Cycles' random-walk subsurface scattering is a Principled BSDF set up to walk in the same medium "
                 "(`nodes/subsurface_np.py`: radius 1 / (σt (1 − g)), the Base Color whose Cycles remap is the "

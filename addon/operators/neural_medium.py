@@ -1,6 +1,8 @@
 """Add Neural Medium Material and Bake Scattering (modal, cancellable), and the CLI's ``bake-medium`` file flow."""
 from __future__ import annotations
 
+import math
+
 import bpy
 
 from .. import presets
@@ -149,6 +151,13 @@ class LAMINA_OT_bake_medium(bpy.types.Operator):
     spacing: bpy.props.FloatProperty(name="Point spacing (mfp)", default=nb.Settings.spacing, min=0.0, max=16.0,
                                      description="Surface points closer than this many mean free paths share one "
                                                  "gather (0: every vertex gathers; 0.5: 2-3% from that, docs/accuracy.md)")
+    grid_angle: bpy.props.FloatProperty(name="Beam grid angle", default=nb.Settings.grid_angle, min=0.0,
+                                        max=math.pi, subtype="ANGLE",
+                                        description="Beams in a cube seen under less than this angle are gathered "
+                                                    "through one representative beam (the paper's grid of virtual "
+                                                    "ray lights; 0: every beam, docs/accuracy.md)")
+    grid_cube: bpy.props.FloatProperty(name="Beam grid cube (mfp)", default=nb.Settings.grid_cube, min=0.01,
+                                       max=64.0, description="Side of the beam grid's cubes in mean free paths")
 
     _timer = None
     _steps = None
@@ -166,7 +175,8 @@ class LAMINA_OT_bake_medium(bpy.types.Operator):
         self._object = obj.name  # the bake is applied to this object, wherever the selection goes meanwhile
         p = medium_nodes.current_params(medium_bake.medium_material(obj))
         self._steps = medium_bake.bake_steps(obj, context.scene, context.evaluated_depsgraph_get(), p,
-                                             nb.Settings(self.cells, self.steps, spacing=self.spacing))
+                                             nb.Settings(self.cells, self.steps, spacing=self.spacing,
+                                                         grid_angle=self.grid_angle, grid_cube=self.grid_cube))
 
     def execute(self, context):  # scripts and headless: the whole bake at once
         try:

@@ -196,6 +196,7 @@ class Table:
     z_edges: np.ndarray
     theta: np.ndarray
     phi: np.ndarray
+    segment: float = 0.0  # 0: Phi at a point; > 0: the paper's accumulated table (``segment_table``), this long
 
     def lookup(self, rho, z, theta, phi) -> np.ndarray:
         """Phi at points (rho, z in mfp) and folded directions: multilinear between the cells' centres in the encoded
@@ -231,6 +232,42 @@ class Table:
             w = axes[a][1]
             values = {c: values[c] + w * (values[c | (1 << a)] - values[c]) for c in values if not (c >> a) & 1}
         return np.where(inside, values[0], 0.0)
+
+
+SEGMENT = 5.0  # mfp: the length of the paper's accumulated camera segment (Sec. 3.7)
+
+
+def segment_table(table: Table, steps: int = 16, length: float = SEGMENT) -> Table:
+    """The paper's segment-to-segment table (Sec. 3.7): at each cell centre x0 and direction bin centre w of
+    ``table``, A(x0, w) = Integral_0^length exp(-s) Phi(x0 - s w, w) ds, the light a camera segment of ``length``
+    mean free paths starting at x0 and looking against w gathers, by ``steps`` quantiles of the exponential.
+    ``gather`` uses it with the paper's weight W (Eq. 5) for shorter segments."""
+    rho_c, z_c = cell_centres(table.rho_edges, table.z_edges)
+    th, ph = (a.ravel() for a in np.meshgrid(table.theta, table.phi, indexing="ij"))
+    w = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], axis=1)  # (D, 3) at (rho, 0, z)
+    reach = -math.expm1(-length)
+    s = -np.log1p(-(np.arange(steps) + 0.5) / steps * reach)
+    out = np.zeros((len(rho_c), len(z_c), len(w)))
+    for i, rho in enumerate(rho_c):
+        x = np.stack([np.full(len(z_c), rho), np.zeros(len(z_c)), z_c], axis=1)[:, None, None, :] \
+            - s[None, :, None, None] * w[None, None, :, :]  # (n_z, steps, D, 3)
+        radial = np.hypot(x[..., 0], x[..., 1])
+        safe = np.maximum(radial, 1e-12)
+        e_rho = np.where((radial > 1e-12)[..., None], np.stack([x[..., 0] / safe, x[..., 1] / safe], axis=-1),
+                         [1.0, 0.0])
+        phi = np.abs(np.arctan2(e_rho[..., 0] * w[None, None, :, 1] - e_rho[..., 1] * w[None, None, :, 0],
+                                e_rho[..., 0] * w[None, None, :, 0] + e_rho[..., 1] * w[None, None, :, 1]))
+        values = table.lookup(radial, x[..., 2], np.broadcast_to(th, radial.shape), phi)
+        out[i] = reach / steps * values.sum(axis=1)
+    return Table(out.reshape(table.values.shape), table.rho_edges, table.z_edges, table.theta, table.phi,
+                 float(length))
+
+
+def segment_weight(tau, length: float = SEGMENT):
+    """The paper's W (Eq. 5) for camera segments ``tau`` mean free paths long: the share of the accumulated
+    segment's attenuation they cover, (1 - exp(-tau)) / (1 - exp(-length)). Eq. 5 as printed sums exp(-i l) over
+    i = 1 ... k with k the segment's length over 5 mfp, which is not a count; this is its continuous form."""
+    return -np.expm1(-np.asarray(tau, dtype=np.float64)) / -math.expm1(-length)
 
 
 def _linear(nodes: np.ndarray, x):
@@ -427,8 +464,75 @@ def _exit_points(shape, starts, directions, length: float):
     return starts + np.maximum(shape.interval(back, directions)[1], 0.0)[:, None] * directions
 
 
+@dataclass(frozen=True)
+class BeamGrid:
+    """Beams sorted into the cubes of a regular grid (the paper's Sec. 4.3, one level): each cube's members and a
+    representative beam, the cube's summed power at its members' power-weighted mean entry point and direction
+    (``beam_grid``). ``gather`` takes a cube's representative instead of its members where the cube, seen from a
+    chunk of camera rays, spans less than ``angle`` radians (Algorithm 1's solid-angle test)."""
+
+    members: tuple  # per cube, the indices of its beams
+    cube: float  # a cube's side
+    centres: np.ndarray  # (C, 3) the cubes' centres
+    radius: float  # half a cube's diagonal
+    angle: float
+
+
+def beam_grid(beams: Beams, cube: float, angle: float) -> BeamGrid:
+    """``beams`` grouped in cubes of side ``cube`` (scene units); ``angle``: see ``BeamGrid``."""
+    keys = np.floor(beams.entries / cube).astype(np.int64)
+    _, inverse = np.unique(keys, axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    members = tuple(np.flatnonzero(inverse == k) for k in range(int(inverse.max()) + 1 if len(inverse) else 0))
+    centres = np.array([(keys[m[0]] + 0.5) * cube for m in members]).reshape(-1, 3)
+    return BeamGrid(members, float(cube), centres, 0.5 * math.sqrt(3.0) * cube, float(angle))
+
+
+UNIT_FIELDS = ("direction", "entry_image_direction", "exit_image_direction")
+
+
+def _representatives(grid: BeamGrid, fields: dict) -> dict:
+    """Per cube, its beams' ``fields`` (name -> per-beam array, ``gather``'s): the summed "power", and of every other
+    field the power-weighted mean (the ``UNIT_FIELDS`` renormalised)."""
+    powers = fields["power"]
+    total = np.array([powers[m].sum() for m in grid.members])
+    out = {"power": total}
+    for name, values in fields.items():
+        if name == "power":
+            continue
+        mean = np.stack([powers[m] @ values[m] for m in grid.members]) / np.maximum(total, 1e-300).reshape(
+            (-1,) + (1,) * (values.ndim - 1))
+        if name in UNIT_FIELDS:
+            mean /= np.maximum(np.linalg.norm(mean, axis=1, keepdims=True), 1e-300)
+        out[name] = mean
+    return out
+
+
+def _morton(keys: np.ndarray) -> np.ndarray:
+    """Z-order codes of integer cube coordinates (N, 3): sorted by them, neighbours in space stay close."""
+    keys = keys - keys.min(axis=0) if len(keys) else keys
+    code = np.zeros(len(keys), dtype=np.int64)
+    for bit in range(20):
+        for axis in range(3):
+            code |= ((keys[:, axis] >> bit) & 1) << (3 * bit + axis)
+    return code
+
+
+def _chosen_sources(grid: BeamGrid, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(beam indices, cube indices): the beams of the cubes that points (P, 3) see under ``grid.angle`` or more,
+    and the cubes whose representative stands for their beams."""
+    centre = points.mean(axis=0)
+    spread = float(np.linalg.norm(points - centre, axis=1).max())
+    distance = np.maximum(np.linalg.norm(grid.centres - centre, axis=1) - spread - grid.radius, 0.0)
+    far = 2.0 * grid.radius < grid.angle * distance
+    near = np.flatnonzero(~far)
+    beams = np.concatenate([grid.members[k] for k in near]) if len(near) else np.zeros(0, dtype=int)
+    return beams, np.flatnonzero(far)
+
+
 def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, directions, kinds=KINDS,
-           steps: int = 24, chunk: int = 16, progress=None, images: Boundary | None = None) -> dict:
+           steps: int = 24, chunk: int = 16, progress=None, images: Boundary | None = None,
+           grid: BeamGrid | None = None) -> dict:
     """Radiance reaching ``origins`` along the rays ``-directions`` (camera rays: origins outside the shape,
     ``directions`` into it) from the double and multiple scattering of the ``beams``' light, one channel: the first
     segment of the camera ray inside the shape integrated with ``steps`` points of the exponential's quantiles,
@@ -443,42 +547,63 @@ def gather(tables: dict, mean_free_path: float, shape, beams: Beams, origins, di
     how far it lies from the earlier ones (``_distinct_weight``: 0 where two planes coincide, e.g. the lit side
     seen from the lit side, 1 where they are distinct, e.g. the far side of a thin part), the exit planes' images
     also by ``images.exits``; the difference is clamped at 0. Measured against the ground truth in
-    docs/training.md. ``progress(done, total)`` is called after each chunk of rays."""
+    docs/training.md. ``grid`` (``beam_grid`` of these beams): each chunk of rays gathers from the beams of the
+    cubes it sees under ``grid.angle`` or more and from the other cubes' representatives (their images the mean of
+    their members'). ``tables`` of ``segment_table`` (the paper's accumulated segments) are looked up once per ray
+    where its segment enters, times ``segment_weight`` (``steps`` unused). ``progress(done, total)`` is called after
+    each chunk of rays."""
     ell = float(mean_free_path)
     origins, directions = np.asarray(origins, dtype=np.float64), np.asarray(directions, dtype=np.float64)
     out = {kind: np.zeros(len(origins)) for kind in kinds}
     t0, t1 = shape.interval(origins, directions)
     rows = np.flatnonzero(np.isfinite(t0) & (t1 > t0))
+    if grid is not None:  # rays entering close together share a chunk, so that more cubes are far from it
+        entries = origins[rows] + np.maximum(t0[rows], 0.0)[:, None] * directions[rows]
+        rows = rows[np.argsort(_morton(np.floor(entries / grid.cube).astype(np.int64)), kind="stable")]
     q = (np.arange(steps) + 0.5) / steps
-    sources, beam_d, powers = beams.entries[None], beams.directions[None], beams.powers
+    first = next(iter(tables.values()))
+    accumulated = first.segment > 0.0
+    fields = {"power": beams.powers, "entry": beams.entries, "direction": beams.directions}
     if images is not None:
         zb = float(images.zb) * ell
-        beam_n = shape.normal(beams.entries)[None]
-        entry_images = _mirror(sources, beam_d, sources, beam_n, zb)
+        entry_images = _mirror(beams.entries, beams.directions, beams.entries, shape.normal(beams.entries), zb)
         leave = _exit_points(shape, beams.entries, beams.directions, ell)
-        exit_images = _mirror(sources, beam_d, leave[None], shape.normal(leave)[None], zb)
-        beam_images = [entry_images[0], exit_images[0]]
-        exit_weight = images.exits * _distinct_weight(exit_images[0], beam_images[:1], zb)[0][None, None, :]
+        exit_images = _mirror(beams.entries, beams.directions, leave, shape.normal(leave), zb)
+        fields.update(entry_image=entry_images[0], entry_image_direction=entry_images[1], exit_image=exit_images[0],
+                      exit_image_direction=exit_images[1],
+                      exit_weight=images.exits * _distinct_weight(exit_images[0], [entry_images[0]], zb))
+    per_cube = _representatives(grid, fields) if grid is not None else None
     for start in range(0, len(rows), chunk):
         r = rows[start:start + chunk]
         tau = (t1[r] - t0[r]) / ell
-        reach = -np.expm1(-tau)  # the probability of a collision along the segment
-        s = -np.log1p(-q[None, :] * reach[:, None]) * ell  # (R, S) quantiles of exp(-s / l) on the segment
-        weight = reach * ell / steps  # Integral exp(-s / l) f ds = sum weight f(s)
         enter = origins[r] + np.maximum(t0[r], 0.0)[:, None] * directions[r]
-        x = enter[:, None, :] + s[..., None] * directions[r, None, :]
+        if accumulated:  # the segment's integral is in the table: one point, the paper's weight
+            weight, x = segment_weight(tau, first.segment) * ell, enter[:, None, :]
+        else:
+            reach = -np.expm1(-tau)  # the probability of a collision along the segment
+            s = -np.log1p(-q[None, :] * reach[:, None]) * ell  # (R, S) quantiles of exp(-s / l) on the segment
+            weight = reach * ell / steps  # Integral exp(-s / l) f ds = sum weight f(s)
+            x = enter[:, None, :] + s[..., None] * directions[r, None, :]
         w = -directions[r]  # the light's propagation direction towards the camera
+        src = fields
+        if grid is not None:
+            chosen, cubes = _chosen_sources(grid, x.reshape(-1, 3))
+            src = {k: np.concatenate([v[chosen], per_cube[k][cubes]]) for k, v in fields.items()}
+        powers, sources, beam_d = src["power"], src["entry"][None], src["direction"][None]
         if images is not None:
+            beam_images = [src["entry_image"], src["exit_image"]]
             far = enter + (t1[r] - np.maximum(t0[r], 0.0))[:, None] * directions[r]
             camera_images = _mirror(sources, beam_d, enter[:, None, :], shape.normal(enter)[:, None, :], zb)
             far_images = _mirror(sources, beam_d, far[:, None, :], shape.normal(far)[:, None, :], zb)
-            weighted = [(entry_images, 1.0), (exit_images, exit_weight),
+            weighted = [((src["entry_image"][None], src["entry_image_direction"][None]), 1.0),
+                        ((src["exit_image"][None], src["exit_image_direction"][None]),
+                         src["exit_weight"][None, None, :]),
                         (camera_images, _distinct_weight(camera_images[0], beam_images, zb)[:, None, :]),
                         (far_images, images.exits * _distinct_weight(far_images[0], beam_images + [camera_images[0]],
                                                                      zb)[:, None, :])]
             at_images = [(tables["multiple"].locate(*_coordinates(x, *image, w, ell)), image_weight)
                          for image, image_weight in weighted]
-        located = next(iter(tables.values())).locate(*_coordinates(x, sources, beam_d, w, ell))
+        located = first.locate(*_coordinates(x, sources, beam_d, w, ell))
         for kind in kinds:
             value = tables[kind].at(located)
             if images is not None and kind == "multiple":

@@ -158,6 +158,8 @@ REFUSALS = [
     (MEDIUM + ("--preset", "milk", "--cells", "0", "--out", "x.blend"), "bake settings out of range"),
     (MEDIUM + ("--preset", "milk", "--spacing", "-1", "--out", "x.blend"), "spacing -1.0 (0-16 mean free paths)"),
     (MEDIUM + ("--preset", "milk", "--spacing", "nan", "--out", "x.blend"), "spacing nan (0-16 mean free paths)"),
+    (MEDIUM + ("--preset", "milk", "--grid-angle", "4", "--out", "x.blend"), "grid angle 4.0 (0-pi)"),
+    (MEDIUM + ("--preset", "milk", "--grid-cube", "0", "--out", "x.blend"), "grid cube 0.0 (0.01-64 mean free paths)"),
     (MEDIUM + ("--out", "x.blend"), "has no Lamina medium material: pass --preset or --json"),
     (MEDIUM + ("--preset", "milk"), "pass --out FILE, or --overwrite"),
     (("bake-medium", "--blend", "in.blend", "--object", "Nope", "--preset", "milk", "--out", "x.blend"),
