@@ -11,7 +11,7 @@ DATA ?= $(HOME)/.cache/lamina/spongecake-ms
 # Neural participating media: tables of double and multiple scattering per material (resumable; docs/training.md).
 MEDIUM_DATA ?= $(HOME)/.cache/lamina/neural-medium
 
-.PHONY: venv test test-4.2 test-all demo bench extension dataset train validation-set medium-dataset medium-networks clean
+.PHONY: venv test test-5.0 test-4.2 test-all demo bench extension dataset train validation-set medium-dataset medium-networks clean
 
 venv: $(VENV)/.stamp
 
@@ -28,9 +28,13 @@ $(VENV42)/.stamp: requirements-blender-4.2.txt
 	$(PY42) -m pip install --quiet -r requirements-blender-4.2.txt
 	touch $@
 
-# The whole suite on bpy 5.0, then the Blender tests again on Blender 4.2 LTS (the oldest supported).
-test: venv test-4.2
-	$(PY) -m pytest -m "not slow" -q
+# The whole suite on bpy 5.0 and, beside it on the other core, the Blender tests on Blender 4.2 LTS (the oldest
+# supported); each suite's output is printed whole when it ends (-O), and make fails if either does.
+test: venv $(VENV42)/.stamp
+	$(MAKE) --no-print-directory -j2 -O test-5.0 test-4.2
+
+test-5.0: venv
+	$(PY) -m pytest -m "not slow" -q -p no:cacheprovider
 
 test-4.2: $(VENV42)/.stamp
 	$(PY42) -m pytest -m "not slow" -q -p no:cacheprovider tests/blender
@@ -57,12 +61,13 @@ medium-dataset: venv
 	$(PY) -m training.medium_dataset --out $(MEDIUM_DATA)
 	$(PY) -m training.medium_dataset --out $(MEDIUM_DATA)-off-grid --albedos 0.95 0.995 --gs 0.3 0.7 --seed 2
 
-# The neural_medium networks from that dataset (addon/bake/weights/neural_medium_*.npz, 11.8 KB each): 15 minutes of
-# training for the multiple network, 15 for the double one (the bake computes double scattering by quadrature; the
-# network is kept for comparison), half of each material's loss weight in proportion to power.
+# The neural_medium networks from that dataset (addon/bake/weights/neural_medium_*.npz, 11.8 KB each): 30 minutes of
+# training for the multiple network, half of each material's loss weight in proportion to the power within a render's
+# reach (falling as exp(-r / 2 mfp)); 15 for the double one (the bake computes double scattering by quadrature; the
+# network is kept for comparison), half of its loss weight in proportion to power.
 medium-networks: venv
-	$(PY) -m training.medium_train --data $(MEDIUM_DATA) --out addon/bake/weights --kinds multiple --minutes 15 \
-		--power-share 0.5 --off-grid $(MEDIUM_DATA)-off-grid
+	$(PY) -m training.medium_train --data $(MEDIUM_DATA) --out addon/bake/weights --kinds multiple --minutes 30 \
+		--power-share 0.5 --power-range 2 --off-grid $(MEDIUM_DATA)-off-grid
 	$(PY) -m training.medium_train --data $(MEDIUM_DATA) --out addon/bake/weights --kinds double --minutes 15 \
 		--power-share 0.5 --off-grid $(MEDIUM_DATA)-off-grid
 

@@ -122,9 +122,11 @@ def write_manifest(out: Path) -> dict:
             continue
         materials.append({"file": path.name, "alpha": meta["alpha"], "g": meta["g"], "config_hash": meta["config_hash"],
                           "photons": meta["photons"], "double_photons": meta["double_photons"],
-                          "seconds": meta["seconds"], "captured": meta["captured"], "seed": meta["seed"]})
+                          "seconds": meta["seconds"], "captured": meta["captured"], "seed": meta["seed"],
+                          "bytes": path.stat().st_size})
     manifest = {"version": VERSION, "materials": materials,
                 "seconds": round(sum(m["seconds"] for m in materials), 1),
+                "megabytes": round(sum(m["bytes"] for m in materials) / 1e6, 1),
                 "definition": "double = Phi_2, multiple = Sum_{k>=3} Phi_k: radiance emitted per unit volume per unit "
                               "source power (see training/medium_tracer.py)"}
     with atomic_path(out / "manifest.json") as tmp:
@@ -187,7 +189,8 @@ def main(argv=None) -> int:
             pool.close()
             pool.join()
     manifest = write_manifest(a.out)
-    print(f"{len(manifest['materials'])} materials in {a.out} ({manifest['seconds']:.0f} s of simulation in all)")
+    print(f"{len(manifest['materials'])} materials in {a.out} ({manifest['seconds']:.0f} s of simulation in all, "
+          f"{manifest['megabytes']:.0f} MB)")
     return 0
 
 
