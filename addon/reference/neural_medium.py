@@ -247,18 +247,14 @@ def segment_table(table: Table, steps: int = 16, length: float = SEGMENT) -> Tab
     w = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], axis=1)  # (D, 3) at (rho, 0, z)
     reach = -math.expm1(-length)
     s = -np.log1p(-(np.arange(steps) + 0.5) / steps * reach)
+    source, axis = np.zeros((1, 1, 3)), np.array([[[0.0, 0.0, 1.0]]])
+    rays = np.tile(w, (len(z_c), 1))  # (n_z D, 3): every direction at every z of the row
     out = np.zeros((len(rho_c), len(z_c), len(w)))
     for i, rho in enumerate(rho_c):
-        x = np.stack([np.full(len(z_c), rho), np.zeros(len(z_c)), z_c], axis=1)[:, None, None, :] \
-            - s[None, :, None, None] * w[None, None, :, :]  # (n_z, steps, D, 3)
-        radial = np.hypot(x[..., 0], x[..., 1])
-        safe = np.maximum(radial, 1e-12)
-        e_rho = np.where((radial > 1e-12)[..., None], np.stack([x[..., 0] / safe, x[..., 1] / safe], axis=-1),
-                         [1.0, 0.0])
-        phi = np.abs(np.arctan2(e_rho[..., 0] * w[None, None, :, 1] - e_rho[..., 1] * w[None, None, :, 0],
-                                e_rho[..., 0] * w[None, None, :, 0] + e_rho[..., 1] * w[None, None, :, 1]))
-        values = table.lookup(radial, x[..., 2], np.broadcast_to(th, radial.shape), phi)
-        out[i] = reach / steps * values.sum(axis=1)
+        starts = np.repeat(np.stack([np.full(len(z_c), rho), np.zeros(len(z_c)), z_c], axis=1), len(w), axis=0)
+        x = starts[:, None, :] - s[None, :, None] * rays[:, None, :]  # (n_z D, steps, 3)
+        values = table.lookup(*(c[..., 0] for c in _coordinates(x, source, axis, rays, 1.0)))
+        out[i] = (reach / steps * values.sum(axis=1)).reshape(len(z_c), len(w))
     return Table(out.reshape(table.values.shape), table.rho_edges, table.z_edges, table.theta, table.phi,
                  float(length))
 
