@@ -134,6 +134,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="gather a cube of beams through one representative beam where it is seen under less than "
                          "this angle in radians (the paper's VRL grid; 0: every beam)")
     bm.add_argument("--grid-cube", type=float, default=1.0, help="the VRL grid's cube side in mean free paths")
+    bm.add_argument("--segments", action="store_true",
+                    help="gather with the paper's accumulated camera segments (faster for many points)")
     _blend_output_args(bm)
 
     cm = sub.add_parser("compare-medium", help="render a neural medium on the comparison sphere: Cycles single "
@@ -451,7 +453,7 @@ def cmd_bake_medium(args) -> int:
     data = _medium_dict(args)
     try:
         settings = nb.Settings(args.cells, args.steps, spacing=args.spacing, grid_angle=args.grid_angle,
-                               grid_cube=args.grid_cube)
+                               grid_cube=args.grid_cube, segments=args.segments)
     except ValueError as e:
         raise CliError(str(e)) from None
     blend, out = _blend_paths(args)

@@ -46,7 +46,8 @@ class Settings:
     surface points may be and share one gather (``gathering_points``, ``spread``; 0: every point gathers);
     ``grid_angle``, ``grid_cube``: the paper's grid of representative beams (``reference.neural_medium.beam_grid``,
     cubes of ``grid_cube`` mean free paths taken whole where seen under less than ``grid_angle`` radians; 0: every
-    beam)."""
+    beam); ``segments``: the paper's accumulated camera segments (``reference.neural_medium.segment_table``: one
+    lookup per ray instead of ``steps``, after a few seconds building them per channel)."""
 
     cells: int = 16
     steps: int = 12
@@ -54,6 +55,7 @@ class Settings:
     spacing: float = 0.5
     grid_angle: float = 0.0
     grid_cube: float = 1.0
+    segments: bool = False
 
     def __post_init__(self):
         if not (1 <= self.cells <= 256 and 1 <= self.steps <= 256 and 0.0 <= self.spacing <= 16.0
@@ -63,10 +65,12 @@ class Settings:
                              f"grid cube {self.grid_cube} (0.01-64 mean free paths)")
 
     def key(self) -> tuple:
-        """What of the settings a bake depends on: the grid's only where it is on (a bake without it keeps the key it
-        had before the grid existed)."""
-        base = (self.cells, self.steps, self.boundary, self.spacing)
-        return base if self.grid_angle == 0.0 else base + (self.grid_angle, self.grid_cube)
+        """What of the settings a bake depends on: the grid's and the segments' only where they are on (a bake
+        without them keeps the key it had before they existed)."""
+        key = (self.cells, self.steps, self.boundary, self.spacing)
+        if self.grid_angle > 0.0:
+            key += (self.grid_angle, self.grid_cube)
+        return key + ("segments",) if self.segments else key
 
 
 def reconstruction_grid(net) -> tuple:
@@ -150,7 +154,9 @@ def bake_points(p, tables: list[dict], shape, beams: list, points, normals, sett
         images = nm.boundary(p.albedo[c], p.g) if settings.boundary else None
         grid = (nm.beam_grid(beams[c], settings.grid_cube * p.mean_free_path[c], settings.grid_angle)
                 if settings.grid_angle > 0.0 and len(beams[c]) else None)
-        radiance = nm.gather(tables[c], p.mean_free_path[c], shape, beams[c], origins, inward, steps=settings.steps,
+        channel = ({kind: nm.segment_table(table) for kind, table in tables[c].items()} if settings.segments
+                   else tables[c])
+        radiance = nm.gather(channel, p.mean_free_path[c], shape, beams[c], origins, inward, steps=settings.steps,
                              progress=report, images=images, grid=grid)
         values = sum(radiance[kind] for kind in nm.KINDS).reshape(len(points), DIRECTIONS)
         out[:, :, c] = fit_linear(directions, values)

@@ -158,6 +158,10 @@ class LAMINA_OT_bake_medium(bpy.types.Operator):
                                                     "ray lights; 0: every beam, docs/accuracy.md)")
     grid_cube: bpy.props.FloatProperty(name="Beam grid cube (mfp)", default=nb.Settings.grid_cube, min=0.01,
                                        max=64.0, description="Side of the beam grid's cubes in mean free paths")
+    segments: bpy.props.BoolProperty(name="Accumulated segments", default=nb.Settings.segments,
+                                     description="Gather with the paper's camera segments integrated ahead of time: "
+                                                 "one lookup per ray instead of one per step, a few seconds to "
+                                                 "build (docs/accuracy.md)")
 
     _timer = None
     _steps = None
@@ -176,7 +180,8 @@ class LAMINA_OT_bake_medium(bpy.types.Operator):
         p = medium_nodes.current_params(medium_bake.medium_material(obj))
         self._steps = medium_bake.bake_steps(obj, context.scene, context.evaluated_depsgraph_get(), p,
                                              nb.Settings(self.cells, self.steps, spacing=self.spacing,
-                                                         grid_angle=self.grid_angle, grid_cube=self.grid_cube))
+                                                         grid_angle=self.grid_angle, grid_cube=self.grid_cube,
+                                                         segments=self.segments))
 
     def execute(self, context):  # scripts and headless: the whole bake at once
         try:
