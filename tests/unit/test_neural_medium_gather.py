@@ -365,19 +365,25 @@ def test_the_papers_accumulated_segments_gather_what_the_quadrature_gathers(clou
         assert b[kind][mask].mean() == pytest.approx(a[kind][mask].mean(), rel=0.05)
 
 
+def _plain_and_changed_bake(tables, points: int, settings, **changes):
+    """The radiance along the normal of a bake of the grey cloud on ``points`` points of the unit sphere with
+    ``settings`` and with ``changes`` to them (the sun's beams at ``settings.cells``)."""
+    import dataclasses
+
+    from addon.bake import neural_medium as nb
+    p = model.params_from_dict({**CLOUD.to_dict(), "sigma_s": [CLOUD.sigma_s[0]] * 3,
+                                "sigma_a": [CLOUD.sigma_a[0]] * 3})
+    x = _fibonacci_sphere(points)
+    beams = [_beams(SCENE.suns, settings.cells)] * 3
+    return [nb.evaluate(nb.bake_points(p, [tables] * 3, truth.Sphere(), beams, x, x, s), x)
+            for s in (settings, dataclasses.replace(settings, **changes))]
+
+
 def test_the_bake_gathers_through_the_beam_grid_when_asked(cloud):
     """``Settings.grid_angle`` reaches the gather: a bake with the grid differs from one without (representatives
     stood in) by under 2%, and the grid enters the bake key only when it is on."""
     from addon.bake import neural_medium as nb
-    tables, _, _, _ = cloud
-    p = model.params_from_dict({**CLOUD.to_dict(), "sigma_s": [CLOUD.sigma_s[0]] * 3,
-                                "sigma_a": [CLOUD.sigma_a[0]] * 3})
-    points = _fibonacci_sphere(400)
-    beams = [_beams(SCENE.suns, 24)] * 3
-    plain = nb.bake_points(p, [tables] * 3, truth.Sphere(), beams, points, points, nb.Settings(cells=24, steps=4))
-    gridded = nb.bake_points(p, [tables] * 3, truth.Sphere(), beams, points, points,
-                             nb.Settings(cells=24, steps=4, grid_angle=1.0, grid_cube=0.5))
-    a, b = nb.evaluate(plain, points), nb.evaluate(gridded, points)
+    a, b = _plain_and_changed_bake(cloud[0], 400, nb.Settings(cells=24, steps=4), grid_angle=1.0, grid_cube=0.5)
     assert not np.array_equal(a, b)
     assert np.sqrt(np.mean((b - a) ** 2)) < 0.02 * a.mean()
     keys = [nb.bake_key({}, "m", [], s, "w") for s in (nb.Settings(), nb.Settings(grid_cube=2.0),
@@ -390,15 +396,7 @@ def test_the_bake_gathers_through_accumulated_segments_when_asked(cloud):
     """``Settings.segments`` reaches the gather: within 5% of the quadrature along each segment on the cloud's
     sphere (the bench measures the error per point), and in the bake key only when on."""
     from addon.bake import neural_medium as nb
-    tables, _, _, _ = cloud
-    p = model.params_from_dict({**CLOUD.to_dict(), "sigma_s": [CLOUD.sigma_s[0]] * 3,
-                                "sigma_a": [CLOUD.sigma_a[0]] * 3})
-    points = _fibonacci_sphere(200)
-    beams = [_beams(SCENE.suns, 12)] * 3
-    plain = nb.bake_points(p, [tables] * 3, truth.Sphere(), beams, points, points, nb.Settings(cells=12, steps=8))
-    fast = nb.bake_points(p, [tables] * 3, truth.Sphere(), beams, points, points,
-                          nb.Settings(cells=12, steps=8, segments=True))
-    a, b = nb.evaluate(plain, points), nb.evaluate(fast, points)
+    a, b = _plain_and_changed_bake(cloud[0], 200, nb.Settings(cells=12, steps=8), segments=True)
     assert not np.array_equal(a, b)
     assert np.sqrt(np.mean((b - a) ** 2)) < 0.05 * a.mean()
     assert nb.bake_key({}, "m", [], nb.Settings(), "w") != nb.bake_key({}, "m", [], nb.Settings(segments=True), "w")
