@@ -14,7 +14,7 @@ import sys
 from . import paths, presets
 from .models import MODELS, REGISTRY
 from .models.params import ParamError
-from .nodes import FORMS, principled_models
+from .nodes import FORMS, MAPPING_KINDS, fittable, principled_models
 from .reference import truth_models
 from .reference.neural_medium_truth import COMPARE_SHAPES
 from .reference.scenes import KINDS
@@ -48,6 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     mm = sub.add_parser("make-material", help="write a .blend with a Lamina material on a sphere")
     _material_args(mm)
     mm.add_argument("--form", default="nodes", choices=FORMS)
+    _mapping_arg(mm)
     mm.add_argument("--out", required=True, help="the .blend to write (refused if it exists, see --overwrite)")
     mm.add_argument("--overwrite", action="store_true", help="replace an existing file")
 
@@ -57,6 +58,7 @@ def build_parser() -> argparse.ArgumentParser:
     cp.add_argument("--out", required=True, help="the results folder (created; refused if it has files, see "
                                                  "--overwrite)")
     cp.add_argument("--overwrite", action="store_true", help="replace the results in an existing --out")
+    _mapping_arg(cp)
     cp.add_argument("--ms", action="store_true",
                     help="multiple scattering: compare SS only, SS + MS (network) and SS + MS (Monte Carlo)")
     cp.add_argument("--ms-paths", type=int, default=2000,
@@ -173,6 +175,13 @@ def _material_args(p) -> None:
     g.add_argument("--json", "--params", dest="params", help="a JSON file with the model's parameter dict")
 
 
+def _mapping_arg(p) -> None:
+    p.add_argument("--mapping", default="auto", choices=MAPPING_KINDS,
+                   help=f"how the closures are found ({', '.join(m for m in MODELS if fittable(m))}; the other models "
+                        "are analytic): the mapping's formulas, tables fitted to the reference, or whichever of the "
+                        "two is closer on the comparison scenes (a fit takes seconds, cached)")
+
+
 def _compare_args(p) -> None:
     p.add_argument("--forms", default=",".join(FORMS), help=f"comma-separated: {', '.join(FORMS)}")
     p.add_argument("--scenes", help=f"comma-separated: {', '.join(SCENES)} (default: all of them; backlit only "
@@ -277,13 +286,25 @@ def cmd_list_presets(args) -> int:
     return 0
 
 
+def _check_mapping(args) -> None:
+    """Refuse ``--mapping fitted`` for a model without a fitted mapping (Auto is its analytic one)."""
+    if args.mapping == "fitted" and not fittable(args.model):
+        raise CliError(f"--mapping: model {args.model} has only its analytic mapping (models with a fitted one: "
+                       f"{', '.join(m for m in MODELS if fittable(m))})")
+
+
 def cmd_make_material(args) -> int:
     p = load_params(args)
+    _check_mapping(args)
     out = _checked(paths.output_file, "--out", args.out, args.overwrite)
     from .operators import blend_io
 
     name = args.preset or os.path.splitext(os.path.basename(args.params))[0]
-    blend_io.write_material_blend(args.model, p, args.form, name, out)
+    record = blend_io.write_material_blend(args.model, p, args.form, name, out, args.mapping)
+    if record is not None:
+        from .nodes.choice import describe
+
+        print(f"lamina: {describe(record)}")
     print(f"lamina: wrote {out}")
     return 0
 
@@ -299,6 +320,7 @@ def cmd_compare(args) -> int:
         raise CliError(reason)
     if args.blends and not compare_run.has_blends(args.model):
         raise CliError(f"--blends: model {args.model} has a single blending weight")
+    _check_mapping(args)
     if args.principled and not compare_run.has_principled(args.model):
         raise CliError(f"--principled: model {args.model} has no Principled BSDF counterpart "
                        f"(models with one: {', '.join(principled_models())})")
@@ -306,7 +328,8 @@ def cmd_compare(args) -> int:
     out = _checked(paths.output_folder, "--out", args.out, args.overwrite)
     report = _in_results_folder(out, lambda folder: compare_run.compare_params(
         args.model, p, forms, scenes, args.samples, args.resolution, args.seed, folder,
-        label=args.preset or "custom", ms=ms, blends=args.blends, principled=args.principled, truth=truth))
+        label=args.preset or "custom", ms=ms, blends=args.blends, principled=args.principled, truth=truth,
+        mapping=args.mapping))
     print(compare_run.summary_lines(report))
     print(f"lamina: wrote {out}")
     return 0

@@ -3,6 +3,7 @@ against the reference on the comparison scenes, the tables of named approximatio
 throughput and Cycles render times."""
 from __future__ import annotations
 
+import contextlib
 import importlib
 import os
 import time
@@ -10,47 +11,123 @@ import time
 import numpy as np
 
 from .. import presets
-from ..nodes import predicted_image
-from ..reference import metrics
+from ..nodes import choice, fittable
+from ..nodes.choice import comparison_errors
 from ..reference import scenes as ref_scenes
+from ..reference.scenes import ACCURACY_SCENES, comparison_scenes  # noqa: F401 (the models' bench modules use them)
 
-ACCURACY_SCENES = ("sphere", "plane", "backlit", "furnace")
 # The furnace reference needs the directional albedo per pixel; this many samples per pixel (MIS) keep
 # its noise near 1%, below the approximations measured here.
 ALBEDO_SAMPLES = 2048
 
 
-def comparison_scenes(resolution: int):
-    """The comparison scenes; the furnace at half resolution (its reference costs an albedo per pixel)."""
-    scenes = [s for s in ref_scenes.default_scenes(resolution) if s.name in ACCURACY_SCENES]
-    return [s.with_resolution(resolution // 2, resolution // 4) if s.kind == "furnace" else s for s in scenes]
-
-
 def mapping_errors(p, resolution: int, model_id: str) -> dict:
     """{form: {scene: rel RMSE of the prediction vs the reference}} plus the reference's mean per scene."""
-    ref_model = importlib.import_module(f"..reference.{model_id}", __package__)
-    out = {"osl": {}, "nodes": {}, "mean": {}}
-    for spec in comparison_scenes(resolution):
-        ref = ref_scenes.reference_image(spec, lambda wi, wo: ref_model.eval(p, wi, wo),
-                                         bsdf_albedo=lambda wo: ref_model.furnace_albedo(p, wo, n=ALBEDO_SAMPLES))
-        mask = ref_scenes.scene_mask(spec)
-        out["mean"][spec.name] = float(ref[mask].mean())
-        for form in ("osl", "nodes"):
-            out[form][spec.name] = metrics.rel_rmse(predicted_image(model_id, p, form, spec), ref, mask)
-    return out
+    errors, means = comparison_errors(model_id, p, {form: (form, None) for form in ("osl", "nodes")}, resolution,
+                                      ALBEDO_SAMPLES, furnace_width=None)
+    return {**errors, "mean": means}
 
 
 def approximation_rows(model, approximations: dict, resolution: int, short=None) -> list[str]:
     """Table rows of ``mapping_errors`` for each named approximation's configuration and scene: name, what it does,
-    the configuration (``short(config)``, when given), scene, reference mean, OSL, node group."""
+    the configuration (``short(config)``, when given), scene, reference mean, OSL, node group, and for models with a
+    fitted mapping the OSL form's fitted mapping (``approximation_header``)."""
     rows = []
     for name, (what, config) in approximations.items():
-        errs = mapping_errors(model.params_from_dict(config), resolution, model.ID)
+        p = model.params_from_dict(config)
+        errs = mapping_errors(p, resolution, model.ID)
+        fitted_errs = _fitted_errors(model.ID, p, resolution) if fittable(model.ID) else None
         shown = f" `{short(config)}` |" if short else ""
         for scene in ACCURACY_SCENES:
+            extra = f" {pct(fitted_errs[scene])} |" if fitted_errs else ""
             rows.append(f"| {name} | {what} |{shown} {scene} | {errs['mean'][scene]:.4f} | {pct(errs['osl'][scene])} | "
-                        f"{pct(errs['nodes'][scene])} |")
+                        f"{pct(errs['nodes'][scene])} |{extra}")
     return rows
+
+
+def approximation_header(model_id: str, short: bool = False) -> list[str]:
+    """The header of ``approximation_rows``' table."""
+    columns = ["approximation", "what it does"] + (["configuration"] if short else []) + [
+        "scene", "ref. mean", "OSL", "node group"] + (["fitted (OSL)"] if fittable(model_id) else [])
+    return ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+
+
+def _fitted_errors(model_id: str, p, resolution: int) -> dict:
+    """{scene: rel RMSE} of the OSL form's fitted mapping of ``p``."""
+    fit = choice.fit_for(model_id, p, "osl")
+    return comparison_errors(model_id, p, {"fitted": ("osl", fit)}, resolution, ALBEDO_SAMPLES,
+                             furnace_width=None)[0]["fitted"]
+
+
+# The issue's goals for the mapping Auto chooses (docs/accuracy.md): rel. RMSE on these scenes at most this much;
+# backlit counted only where the reference's mean reaches ``choice.BACKLIT_MIN_MEAN``.
+GOALS = {"sphere": 0.15, "plane": 0.15, "furnace": 0.15, "backlit": 0.25}
+
+
+def mapping_section(model, resolution: int) -> list[str]:
+    """"## Analytic and fitted mappings": per preset and scene, both forms' analytic error and the error of the
+    mapping Auto chooses (at the bench's settings), against ``GOALS``; per preset and form, what Auto picked, the
+    closure counts, and the time to fit and to measure (fresh caches)."""
+    lines = ["", "## Analytic and fitted mappings", "",
+             "Auto renders, per material and form, whichever mapping has the lower mean error on these comparison "
+             "scenes (measured when the material is built, at 48 px with a 12 px furnace; `nodes.choice`). Goals: "
+             + ", ".join(f"{scene} ≤ {100 * g:.0f}%" for scene, g in GOALS.items())
+             + f" (backlit only where the reference's mean reaches {choice.BACKLIT_MIN_MEAN:g}).", "",
+             "| preset | scene | ref. mean | OSL analytic | OSL Auto | node group analytic | node group Auto | goal |",
+             "|---|---|---|---|---|---|---|---|"]
+    summary = ["", "| preset | form | Auto renders | closures analytic → fitted | fit s | measure s |",
+               "|---|---|---|---|---|---|"]
+    with fresh_fit_cache():
+        for name in presets.names(model.ID):
+            p = model.params_from_dict(presets.load(model.ID, name))
+            chosen = {}
+            for form in ("osl", "nodes"):
+                fit_seconds = timed(lambda: choice.fit_for(model.ID, p, form))
+                start = time.perf_counter()
+                chosen[form] = choice.choose(model.ID, p, form, "auto")
+                summary.append(f"| {name} | {form} | {chosen[form].used} | {_closures(model.ID, p, form, None)} → "
+                               f"{_closures(model.ID, p, form, choice.fit_for(model.ID, p, form))} | "
+                               f"{fit_seconds:.1f} | {time.perf_counter() - start:.1f} |")
+            shaders = {f"{form} {m}": (form, chosen[form].fit if m == "auto" else None)
+                       for form in ("osl", "nodes") for m in ("analytic", "auto")}
+            errors, means = comparison_errors(model.ID, p, shaders, resolution, ALBEDO_SAMPLES, furnace_width=None)
+            for scene in ACCURACY_SCENES:
+                cells = " | ".join(pct(errors[label][scene]) for label in shaders)
+                lines.append(f"| {name} | {scene} | {means[scene]:.4f} | {cells} | "
+                             f"{_goal(scene, means[scene], errors['osl auto'][scene], errors['nodes auto'][scene])} |")
+    return lines + summary
+
+
+def _goal(scene: str, mean: float, *errors) -> str:
+    if mean < choice.BACKLIT_MIN_MEAN:
+        return "n/a"
+    return "met" if max(errors) <= GOALS[scene] else "not met"
+
+
+def _closures(model_id: str, p, form: str, fit) -> int:
+    from ..nodes import _backend
+
+    return len(_backend(model_id, p, form, np.array([[0.0, 0.0, 1.0]]), fit).closures)
+
+
+@contextlib.contextmanager
+def fresh_fit_cache():
+    """Fits and measurements from scratch (a temporary cache folder, empty memory caches), so times are real."""
+    import tempfile
+
+    saved = os.environ.get("LAMINA_CACHE")
+    with tempfile.TemporaryDirectory(prefix="lamina_fits_") as tmp:
+        os.environ["LAMINA_CACHE"] = tmp
+        choice._fits.clear()
+        choice._references.clear()
+        try:
+            yield
+        finally:
+            if saved is None:
+                os.environ.pop("LAMINA_CACHE", None)
+            else:
+                os.environ["LAMINA_CACHE"] = saved
+            choice._fits.clear()
 
 
 def preset_rows(model, resolution: int) -> list[str]:
@@ -116,13 +193,18 @@ def pct(x: float) -> str:
 
 def preset_render_times(model_id: str, samples: int, resolution: int, repeats: int = 3) -> list[dict]:
     """Cycles render time of each of the model's presets as node group, OSL and its Principled BSDF
-    (``principled_settings``: about the same lobe count, or the same material where the model has a counterpart)."""
+    (``principled_settings``: about the same lobe count, or the same material where the model has a counterpart),
+    and for models with a fitted mapping both forms fitted ("nodes fitted", "osl fitted")."""
     from ..models import MODELS
     from ..nodes import material as lamina_material
 
     def materials(name):
         p = MODELS[model_id].params_from_dict(presets.load(model_id, name))
-        return {**{form: lamina_material.new_material(model_id, p, form) for form in ("nodes", "osl")},
-                "principled": lamina_material.principled_material(model_id, p)}
+        out = {**{form: lamina_material.new_material(model_id, p, form) for form in ("nodes", "osl")},
+               "principled": lamina_material.principled_material(model_id, p)}
+        if fittable(model_id):
+            out.update({f"{form} fitted": lamina_material.new_material(model_id, p, form, mapping="fitted")
+                        for form in ("nodes", "osl")})
+        return out
 
     return fastest_renders(presets.names(model_id), materials, samples, resolution, repeats)

@@ -16,8 +16,8 @@ from ..nodes import spongecake as mapping
 from ..reference import metrics
 from ..reference import scenes as ref_scenes
 from ..reference import spongecake as reference
-from .common import (ACCURACY_SCENES, approximation_rows, comparison_scenes, mapping_errors, pct,
-                     preset_render_times, reference_throughput, timed)
+from .common import (ACCURACY_SCENES, approximation_header, approximation_rows, comparison_scenes, mapping_errors,
+                     mapping_section, pct, preset_render_times, reference_throughput, timed)
 
 MODEL = model.ID
 
@@ -56,8 +56,8 @@ def speed(sizes) -> str:
 def accuracy_markdown(resolution: int) -> str:
     lines = ["# SpongeCake", "",
              "## Named approximations, each isolated", "",
-             "| approximation | what it does | configuration | scene | ref. mean | OSL | node group |",
-             "|---|---|---|---|---|---|---|"]
+             "The fitted column: the OSL form's fitted mapping (`nodes.fitted`: the closures rescaled per view, a few "
+             "added) of the same configuration.", "", *approximation_header(MODEL, short=True)]
     lines += approximation_rows(model, mapping.APPROXIMATIONS, resolution, _short)
     lines += ["", "## Presets", "",
               "Reference vs ground truth: mean relative error of the analytic single scattering against the "
@@ -71,7 +71,8 @@ def accuracy_markdown(resolution: int) -> str:
             lines.append(f"| {name} | {scene} | {errs['mean'][scene]:.4f} | {pct(errs['osl'][scene])} | "
                          f"{pct(errs['nodes'][scene])} |")
         gt_rows.append(f"| {name} | {pct(ground_truth_error(p))} |")
-    lines += ["", "| preset | reference vs ground truth (single scattering) |", "|---|---|", *gt_rows, ""]
+    lines += ["", "| preset | reference vs ground truth (single scattering) |", "|---|---|", *gt_rows]
+    lines += mapping_section(model, resolution) + [""]
     return "\n".join(lines)
 
 
@@ -95,11 +96,13 @@ def benchmarks_markdown(samples: int, resolution: int) -> str:
              "3 renders, no bounces (OSL scenes enable the OSL shading system, as users must). The Principled BSDF "
              "material has about the same lobe count (coat for a second layer, sheen for fibers, "
              "transmission when nothing blocks the back).", "",
-             "| preset | node group s | OSL s | Principled s | node group : Principled | OSL : node group |",
-             "|---|---|---|---|---|---|"]
+             "| preset | node group s | OSL s | Principled s | node group : Principled | OSL : node group | "
+             "fitted : analytic node group | fitted : analytic OSL |",
+             "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['preset']} | {r['nodes']:.2f} | {r['osl']:.2f} | {r['principled']:.2f} | "
-                     f"{r['nodes'] / r['principled']:.2f} | {r['osl'] / r['nodes']:.2f} |")
+                     f"{r['nodes'] / r['principled']:.2f} | {r['osl'] / r['nodes']:.2f} | "
+                     f"{r['nodes fitted'] / r['nodes']:.2f} | {r['osl fitted'] / r['osl']:.2f} |")
     return "\n".join(lines) + "\n"
 
 

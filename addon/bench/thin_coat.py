@@ -16,7 +16,8 @@ from ..reference import thin_coat as reference
 from ..reference import thin_coat_truth as truth
 from ..reference import vmf, warping
 from ..reference.frames import spherical
-from .common import (approximation_rows, fastest_renders, pct, preset_render_times, preset_rows, reference_throughput,
+from .common import (approximation_header, approximation_rows, fastest_renders, mapping_section, pct,
+                     preset_render_times, preset_rows, reference_throughput,
                      timed)
 
 MODEL = model.ID
@@ -256,9 +257,11 @@ def _mapping_section(resolution: int) -> list[str]:
              "Relative RMSE of the form's numpy prediction against the reference on a configuration chosen to feature "
              "each approximation (as in the other models' sections). The Beckmann shape of the subsurface lobes "
              "(endf-as-beckmann) is present in every configuration with subsurface orders, so an approximation of "
-             "the node group alone (kappa-without-newton) shows as the difference between the two columns.",
-             "", "| approximation | what it does | scene | ref. mean | OSL | node group |", "|---|---|---|---|---|---|"]
-    return lines + approximation_rows(model, mapping.APPROXIMATIONS, resolution) + preset_rows(model, resolution)
+             "the node group alone (kappa-without-newton) shows as the difference between the two columns; the "
+             "fitted mapping (OSL) rescales the closures per view and may add some (`nodes.fitted`).",
+             "", *approximation_header(MODEL)]
+    return (lines + approximation_rows(model, mapping.APPROXIMATIONS, resolution) + preset_rows(model, resolution)
+            + mapping_section(model, resolution))
 
 
 # ------------------------------------------------------------------------------------------ speed
@@ -312,9 +315,11 @@ def speed_markdown(samples: int, resolution: int) -> str:
     lines += ["", "### Node group : OSL : Principled coat", "",
               "Same scene and settings, each preset (default 2 bounces) against Blender's Principled BSDF with a "
               "coat of the same roughness and IOR.", "",
-              "| preset | node group s | OSL s | Principled coat s | node group : Principled | OSL : Principled |",
-              "|---|---|---|---|---|---|"]
+              "| preset | node group s | OSL s | Principled coat s | node group : Principled | OSL : Principled | "
+              "fitted : analytic node group | fitted : analytic OSL |",
+              "|---|---|---|---|---|---|---|---|"]
     for r in preset_render_times(MODEL, samples, resolution):
         lines.append(f"| {r['preset']} | {r['nodes']:.2f} | {r['osl']:.2f} | {r['principled']:.2f} | "
-                     f"{r['nodes'] / r['principled']:.2f} | {r['osl'] / r['principled']:.2f} |")
+                     f"{r['nodes'] / r['principled']:.2f} | {r['osl'] / r['principled']:.2f} | "
+                     f"{r['nodes fitted'] / r['nodes']:.2f} | {r['osl fitted'] / r['osl']:.2f} |")
     return "\n".join(lines) + "\n"

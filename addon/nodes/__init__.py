@@ -1,12 +1,20 @@
 """Cycles shaders generated from each model's mapping (``<model>.py``, bpy-free) in two forms:
 a native node group (``node_backend``) and an OSL script node (``osl``); ``material`` assembles them."""
-from . import aniso_stack, bulk, micrograin, spongecake, thin_coat
+from . import aniso_stack, bulk, fitted, micrograin, spongecake, thin_coat
 
 # Model id -> mapping; "bulk" is the simple BSDFs that reference bulks under a porous layer are made of.
 MAPPINGS = {"spongecake": spongecake, "micrograin": micrograin, "thin_coat": thin_coat, "aniso_stack": aniso_stack,
             bulk.ID: bulk}
 FORMS = ("nodes", "osl")  # node group (every device) and OSL script (CPU, OptiX)
 FORM_LABELS = {"nodes": "node group", "osl": "OSL"}
+# How a material's closures are found (independent of the form): the mapping's own formulas, the fitted tables
+# (``fitted``), or whichever of the two the comparison scenes measure closer to the reference (``choice``).
+MAPPING_KINDS = ("analytic", "fitted", "auto")
+
+
+def fittable(model_id: str) -> bool:
+    """Whether the model's mapping offers the fitted mapping (its ``FITTABLE``)."""
+    return getattr(MAPPINGS.get(model_id), "FITTABLE", False)
 
 
 def approximations(model_id: str, p) -> list[tuple[str, str]]:
@@ -32,40 +40,50 @@ def principled_models() -> list[str]:
     return [m for m in MAPPINGS if principled_counterpart(m) is not None]
 
 
-def _backend(model_id: str, p, form: str, wo):
+def _backend(model_id: str, p, form: str, wo, fit=None):
     from .expr import NumpyBackend
 
     mapping = MAPPINGS[model_id]
     bulk = mapping.numpy_bulk(p, form) if hasattr(mapping, "numpy_bulk") else None
     b = NumpyBackend(wo, mapping.input_values(p), form, bulk)
-    mapping.shade(b, p)
+    shade(b, model_id, p, fit)
     return b
 
 
-def predicted_eval(model_id: str, p, form: str):
-    """``f(wi, wo)`` of what Cycles renders for ``p`` in ``form``, computed in numpy from the same mapping."""
-    return lambda wi, wo: _backend(model_id, p, form, wo).evaluate(wi)
+def shade(b, model_id: str, p, fit=None) -> None:
+    """The closures of ``p`` on backend ``b``: the mapping's own (``fit`` None) or the fitted ones."""
+    if fit is None:
+        MAPPINGS[model_id].shade(b, p)
+    else:
+        fitted.shade(b, MAPPINGS[model_id], p, fit)
 
 
-def predicted_furnace(model_id: str, p, form: str):
+def predicted_eval(model_id: str, p, form: str, fit=None):
+    """``f(wi, wo)`` of what Cycles renders for ``p`` in ``form``, computed in numpy from the same mapping (the
+    fitted one with ``fit``)."""
+    return lambda wi, wo: _backend(model_id, p, form, wo, fit).evaluate(wi)
+
+
+def predicted_furnace(model_id: str, p, form: str, fit=None):
     """``a(wo)``: what a white furnace shows through the form, directional albedo plus transparency. Closures with an
     albedo quadrature of their own (``closures_np.ALBEDO``: Lambert, sharp Beckmann lobes) use it; the others are
     integrated on ``reference.scenes.directional_albedo``'s direction grid."""
     from ..reference.scenes import directional_albedo
 
     def furnace(wo):
-        b = _backend(model_id, p, form, wo)
+        b = _backend(model_id, p, form, wo, fit)
         own, rest = b.own_albedo()
         if rest:
-            own = own + directional_albedo(lambda wi, w: _backend(model_id, p, form, w).evaluate(wi, own=False), wo)
+            own = own + directional_albedo(lambda wi, w: _backend(model_id, p, form, w, fit).evaluate(wi, own=False),
+                                           wo)
         return own + b.transparency()
 
     return furnace
 
 
-def predicted_image(model_id: str, p, form: str, scene):
+def predicted_image(model_id: str, p, form: str, scene, fit=None):
     """A comparison scene as the form renders it (no sampling noise)."""
     from ..reference.scenes import reference_image
 
-    return reference_image(scene, predicted_eval(model_id, p, form),
-                           bsdf_albedo=predicted_furnace(model_id, p, form))
+    return reference_image(scene, predicted_eval(model_id, p, form, fit),
+                           bsdf_albedo=predicted_furnace(model_id, p, form, fit))

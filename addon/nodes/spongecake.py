@@ -55,6 +55,9 @@ def _one(**layer):
     return {"layers": [{"albedo": [1, 1, 1], **layer}]}
 
 
+# The fitted mapping (``fitted``) rescales these closures per view and may add a few: offered here.
+FITTABLE = True
+
 APPROXIMATIONS = {
     "mirror-G": ("Eq. 12's G evaluated at Λi = Λo (thin layers; exact when thick)",
                  _one(type="surface", roughness=0.3, thickness=0.3)),

@@ -71,6 +71,9 @@ def _config(**kw) -> dict:
     return {**model.default_params().to_dict(), "bounces": 1, **kw}
 
 
+# The fitted mapping (``fitted``) rescales these closures per view and may add a few: offered here.
+FITTABLE = True
+
 APPROXIMATIONS = {
     "surface-as-beckmann": ("the top's vMF NDF with Eq. 8's masking rendered as Beckmann with Cycles' G2, scaled by "
                             "the masking ratio at the mirror configuration",

@@ -87,16 +87,19 @@ def preview_scene(mat, name: str) -> bpy.types.Scene:
     return scene
 
 
-def write_material_blend(model_id: str, p, form: str, name: str, path: str) -> None:
-    """Build the material and its preview scene, write only them to ``path`` atomically, then remove them."""
+def write_material_blend(model_id: str, p, form: str, name: str, path: str, mapping: str = "analytic"):
+    """Build the material and its preview scene, write only them to ``path`` atomically, then remove them. Returns
+    the material's mapping record (``nodes.material.fit_record``; None for the analytic mapping)."""
     before = snapshot()
-    mat = lamina_material.new_material(model_id, p, form, name=f"Lamina {name}")
+    mat = lamina_material.new_material(model_id, p, form, name=f"Lamina {name}", mapping=mapping)
+    record = lamina_material.fit_record(mat)
     scene = preview_scene(mat, name)
     try:
         with atomic_path(path) as tmp, blender_quiet():
             bpy.data.libraries.write(tmp, {scene}, fake_user=True)
     finally:
         remove_new_data(before)
+    return record
 
 
 COLLECTIONS = ("scenes", "objects", "meshes", "materials", "node_groups", "texts", "lights", "cameras",

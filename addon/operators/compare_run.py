@@ -27,7 +27,7 @@ import numpy as np
 
 from ..bake.exr import atomic_path, read_exr, write_exr, write_png
 from ..models import MODELS
-from ..nodes import MAPPINGS, predicted_image, principled_counterpart
+from ..nodes import MAPPINGS, choice, predicted_image, principled_counterpart
 from ..nodes import material as lamina_material
 from ..reference import metrics, montecarlo, truth_module
 from ..reference import spongecake_truth as ms_truth
@@ -150,7 +150,7 @@ def compare_material(mat, scenes, samples: int, resolution: int, seed: int, out_
     form = lamina_material.form_of(mat)
     for spec in specs:
         reference = read_exr(report[spec.name]["files"]["reference"], "RGB")
-        approx = predicted_image(model_id, p, form, spec)
+        approx = predicted_image(model_id, p, form, spec, lamina_material.fit_of(mat))
         report[spec.name]["mapping_rel_rmse"] = metrics.rel_rmse(approx, reference, ref_scenes.scene_mask(spec))
         if ms is not None:
             cycles = read_exr(report[spec.name]["files"]["cycles"], "RGB")
@@ -409,17 +409,19 @@ def ms_picture(cycles, single, network, truth, mask, gap: int = 2) -> np.ndarray
 
 def compare_params(model_id: str, p, forms, scenes, samples: int, resolution: int, seed: int, out_dir: str,
                    label: str = "custom", ms: ms_truth.TruthSettings | None = None, blends: bool = False,
-                   principled: bool = False, truth: CoatTruth | None = None) -> dict:
+                   principled: bool = False, truth: CoatTruth | None = None, mapping: str = "analytic") -> dict:
     """Build a temporary material per form, compare it, remove it again; write ``report.json``.
     With ``ms`` the materials have multiple scattering on and every scene is also compared with the Monte
     Carlo ground truth (``compare_material``); ``report["ms"]`` records the ground truth's settings.
     ``scenes`` None: ``default_scene_names(p)``. ``principled`` / ``truth``: see ``compare_material``
-    (``report["principled"]`` records the Principled settings, ``report["truth"]`` the ground truth's)."""
+    (``report["principled"]`` records the Principled settings, ``report["truth"]`` the ground truth's).
+    ``mapping``: the materials' (``nodes.MAPPING_KINDS``); ``report["mappings"][form]`` records which one each form
+    uses and both mappings' predicted errors on the comparison scenes (models with a fitted mapping)."""
     scenes = default_scene_names(p) if scenes is None else scenes
     if ms is not None:
         p = with_multiple_scattering(model_id, p)
     report = {"model": model_id, "label": label, "params": p.to_dict(), "samples": samples,
-              "resolution": resolution, "seed": seed, "forms": {}}
+              "resolution": resolution, "seed": seed, "mapping": mapping, "forms": {}, "mappings": {}}
     if ms is not None:
         report["ms"] = {"paths": ms.paths, "albedo_paths": ms.albedo_paths, "stride": ms.stride,
                         "max_depth": ms.max_depth, "seed": ms.seed}
@@ -435,10 +437,13 @@ def compare_params(model_id: str, p, forms, scenes, samples: int, resolution: in
     for form in forms:
         before = blend_io.snapshot()
         try:
-            mat = lamina_material.new_material(model_id, p, form, name=f"Lamina compare {label}")
+            mat = lamina_material.new_material(model_id, p, form, name=f"Lamina compare {label}", mapping=mapping)
             entries = compare_material(mat, scenes, samples, resolution, seed, os.path.join(out_dir, form),
                                        reference_cache=references, ms=ms, blends=blends, principled=principled,
                                        truth=truth)
+            record = lamina_material.fit_record(mat)
+            if record is not None:
+                report["mappings"][form] = record_summary(record)
         finally:
             blend_io.remove_new_data(before)
         report["forms"][form] = {scene: _json_entry(e, out_dir) for scene, e in entries.items()}
@@ -495,8 +500,18 @@ def ms_line(m: dict) -> str:
 def summary_lines(report: dict) -> str:
     lines = [f"{report['model']} {report['label']}:"]
     for form, entries in report["forms"].items():
+        if form in report.get("mappings", {}):
+            lines.append(f"  {form:5s} {choice.describe(report['mappings'][form])}")
         lines += [f"  {form:5s} {line}" for line in scene_lines(entries)]
     return "\n".join(lines)
+
+
+def record_summary(record: dict) -> dict:
+    """What a report keeps of a material's mapping record (``fit_record``): which one renders, both predicted
+    errors, and a note (e.g. linked inputs)."""
+    return {"used": record["used"], "predicted_error": record["error"],
+            **({"note": record["note"]} if "note" in record else {})}
+
 
 
 def show_side_by_side(context, entries: dict, out_dir: str):

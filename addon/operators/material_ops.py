@@ -4,6 +4,7 @@ modified, only a slot's link may change."""
 from __future__ import annotations
 
 import math
+import threading
 
 import bpy
 
@@ -11,12 +12,17 @@ from .. import presets
 from ..models import MODELS
 from ..models.metals import METALS
 from ..models.params import ParamError
+from ..nodes import choice, fittable
 from ..nodes import material as lamina_material
 from . import blend_io
+from .progress import end_modal
 
 CUSTOM = "CUSTOM"
 FORM_ITEMS = [("nodes", "Node group", "Native nodes: every device, fastest, most approximate"),
               ("osl", "OSL", "OSL script: CPU and OptiX only, exact Fresnel")]
+MAPPING_ITEMS = [("analytic", "Analytic", "The mapping's own formulas of the view (instant)"),
+                 ("fitted", "Fitted", "Per-view tables fitted to the reference (seconds, cached)"),
+                 ("auto", "Auto", "Whichever of the two renders closer to the reference on the comparison scenes")]
 
 
 def label(name: str) -> str:
@@ -88,6 +94,8 @@ class AddMaterialDialog:
     dialog_width = 300
 
     form: bpy.props.EnumProperty(name="Form", items=FORM_ITEMS, default="nodes")
+    mapping: bpy.props.EnumProperty(name="Mapping", items=MAPPING_ITEMS, default="auto",
+                                    description="How the closures are found (models with a fitted mapping)")
 
     @classmethod
     def poll(cls, context):
@@ -115,7 +123,18 @@ def add_material(op, context, model_id: str, data: dict, name: str) -> set:
     assign_to_active_slot(context.active_object, mat)
     warn_if_osl_is_off(op, context, op.form)
     op.report({"INFO"}, f"Added material {mat.name}")
+    if fittable(model_id) and op.mapping != "analytic":
+        choose_mapping(context, mat, op.mapping)
     return {"FINISHED"}
+
+
+def choose_mapping(context, mat, mapping: str) -> None:
+    """Give ``mat`` the ``mapping``: fitted and measured in the background with a progress bar where there is a
+    window (the material renders as it is until then), at once otherwise."""
+    if context.window is not None:
+        bpy.ops.lamina.set_mapping("INVOKE_DEFAULT", mapping=mapping, material=mat.name)
+    else:
+        lamina_material.set_mapping(mat, mapping)
 
 
 def warn_if_osl_is_off(op, context, form: str) -> None:
@@ -147,6 +166,89 @@ def assign_to_active_slot(obj, mat) -> None:
         obj.material_slots[obj.active_material_index].material = mat
 
 
+class LAMINA_OT_set_mapping(bpy.types.Operator):
+    """Choose how the active Lamina material's closures are found: analytic, fitted to the reference, or Auto (the
+    closer of the two); also refits after the values changed"""
+
+    bl_idname = "lamina.set_mapping"
+    bl_label = "Set Lamina Mapping"
+    bl_options = {"REGISTER", "UNDO"}
+
+    mapping: bpy.props.EnumProperty(name="Mapping", items=MAPPING_ITEMS, default="auto")
+    material: bpy.props.StringProperty(name="Material", description="The material (default: the active one)",
+                                       options={"HIDDEN", "SKIP_SAVE"})
+
+    @classmethod
+    def poll(cls, context):
+        return lamina_material.is_lamina(getattr(context, "material", None))
+
+    def _material(self, context):
+        return bpy.data.materials.get(self.material) if self.material else getattr(context, "material", None)
+
+    def execute(self, context):
+        mat = self._material(context)
+        if not lamina_material.is_lamina(mat):
+            self.report({"ERROR"}, f"{self.material or 'The active material'} is not a Lamina material")
+            return {"CANCELLED"}
+        try:
+            lamina_material.set_mapping(mat, self.mapping)
+        except Exception as e:  # noqa: BLE001 - report, leave the material as it was
+            self.report({"ERROR"}, f"Could not set the mapping of {mat.name}: {e}")
+            return {"CANCELLED"}
+        record = lamina_material.fit_record(mat)
+        if record is not None:
+            self.report({"INFO"}, f"{mat.name}: {choice.describe(record)}")
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        """Fit and measure in a thread (numpy only), then rebuild on the main thread from the cache."""
+        mat = self._material(context)
+        if not lamina_material.is_lamina(mat) or self.mapping == "analytic":
+            return self.execute(context)
+        model_id, p = lamina_material.current_params(mat)
+        if not fittable(model_id):
+            return self.execute(context)
+        self.material = mat.name
+        form = lamina_material.form_of(mat)
+        self._error = None
+
+        def work():
+            try:
+                choice.choose(model_id, p, form, self.mapping)
+            except Exception as e:  # noqa: BLE001 - reported on the main thread
+                self._error = e
+
+        self._thread = threading.Thread(target=work, daemon=True)
+        self._thread.start()
+        self._ticks = 0
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.25, window=context.window)
+        wm.progress_begin(0, 100)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            end_modal(context, self._timer)
+            self.report({"WARNING"}, f"{self.material}: mapping left as it was (the fit finishes in the background "
+                                     "and is cached)")
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        if self._thread.is_alive():
+            self._ticks += 1
+            context.window_manager.progress_update(min(95, self._ticks * 2))  # about 10 s
+            if context.workspace is not None:
+                context.workspace.status_text_set(f"Lamina: fitting and measuring {self.material} (Esc: leave it)")
+            return {"RUNNING_MODAL"}
+        end_modal(context, self._timer)
+        if self._error is not None:
+            self.report({"ERROR"}, f"Could not fit {self.material}: {self._error}")
+            return {"CANCELLED"}
+        return self.execute(context)
+
+
+
 class LAMINA_OT_set_form(bpy.types.Operator):
     """Switch the active Lamina material between its node-group and OSL forms, keeping the parameter values"""
 
@@ -171,4 +273,4 @@ class LAMINA_OT_set_form(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (LAMINA_OT_set_form,)
+classes = (LAMINA_OT_set_form, LAMINA_OT_set_mapping)

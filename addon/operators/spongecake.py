@@ -52,6 +52,7 @@ class LAMINA_OT_add_spongecake(AddMaterialDialog, bpy.types.Operator):
         if not row.enabled:
             layout.label(text=f"Multiple scattering needs 1 or {model.MS_MAX_LAYERS} layers", icon="INFO")
         layout.prop(self, "form", expand=True)
+        layout.prop(self, "mapping", expand=True)
 
     def _layer_count(self) -> int:
         return self.layers if self.preset == CUSTOM else len(presets.load(model.ID, self.preset)["layers"])

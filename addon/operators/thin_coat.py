@@ -72,6 +72,7 @@ class LAMINA_OT_add_thin_coat(AddMaterialDialog, bpy.types.Operator):
         col.label(text="0: the top interface only (fastest); each bounce adds a lobe,", icon="INFO")
         col.label(text="the first carries most of the energy: 2 is usually enough")
         layout.row().prop(self, "form", expand=True)
+        layout.row().prop(self, "mapping", expand=True)
 
     def _draw_preset(self, col) -> None:
         """The preset's description and values (edit them on the Lamina node afterwards)."""

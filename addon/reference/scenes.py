@@ -193,6 +193,18 @@ def default_scenes(resolution=64) -> list[Scene]:
 
 # ------------------------------------------------------------------------------------------ geometry
 
+# The scenes on which every mapping's error is measured (``make bench``, the mapping choice, ``compare``).
+ACCURACY_SCENES = ("sphere", "plane", "backlit", "furnace")
+
+
+def comparison_scenes(resolution: int, furnace_width: int | None = None) -> list[Scene]:
+    """The comparison scenes; the furnace ``furnace_width`` wide (default half the resolution: its reference costs
+    an albedo per pixel)."""
+    scenes = [s for s in default_scenes(resolution) if s.name in ACCURACY_SCENES]
+    width = furnace_width or resolution // 2
+    return [s.with_resolution(width, width // 2) if s.kind == "furnace" else s for s in scenes]
+
+
 def _pixel_centres(n: int) -> np.ndarray:
     return (np.arange(n, dtype=np.float64) + 0.5) / n
 

@@ -8,8 +8,10 @@ import importlib
 import bpy
 
 from ..models import MEDIA, MODELS, REGISTRY
+from ..nodes import fittable
 from ..nodes import material as lamina_material
 from ..operators import MODEL_OPERATORS, compare_run
+from ..operators.material_ops import MAPPING_ITEMS
 
 MODEL_UI = {model_id: importlib.import_module(f".{model_id}", __package__) for model_id in REGISTRY}
 
@@ -44,6 +46,8 @@ class LAMINA_PT_main(bpy.types.Panel):
         for value, label in (("nodes", "Node group"), ("osl", "OSL")):
             op = row.operator("lamina.set_form", text=label, depress=(form == value))
             op.form = value
+        if fittable(lamina_material.info(mat)["model"]):
+            _draw_mapping(box, mat)
         scene = context.scene
         if form == "osl" and not (scene.render.engine == "CYCLES" and scene.cycles.shading_system):
             box.label(text="OSL renders only in Cycles with Open Shading Language on", icon="ERROR")
@@ -60,6 +64,25 @@ def _draw_add_buttons(col, mat) -> None:
         row = col.row(align=True)
         row.enabled = operators.can_add(mat) if hasattr(operators, "can_add") else True
         row.operator(idname, icon=icon)
+
+
+def _draw_mapping(box, mat) -> None:
+    """Analytic / Fitted / Auto, both mappings' predicted errors, which one renders, and a Refit when stale."""
+    current = lamina_material.mapping_of(mat)
+    row = box.row(align=True)
+    for value, label, _ in MAPPING_ITEMS:
+        row.operator("lamina.set_mapping", text=label, depress=(current == value)).mapping = value
+    record = lamina_material.fit_record(mat)
+    if record is None:
+        return
+    box.label(text=f"Renders the {record['used']} mapping", icon="CHECKMARK" if record["used"] == "fitted" else "INFO")
+    if record["error"]:
+        box.label(text="Predicted error: " + ", ".join(f"{name} {100 * e:.1f}%" for name, e in record["error"].items()))
+    if record.get("note"):
+        box.label(text=record["note"], icon="INFO")
+    if lamina_material.fit_is_stale(mat):
+        box.label(text="Values changed since the fit: it renders the old one", icon="ERROR")
+        box.operator("lamina.set_mapping", text="Refit", icon="FILE_REFRESH").mapping = current
 
 
 def _draw_summary(box, mat, model_ui) -> None:

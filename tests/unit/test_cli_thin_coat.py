@@ -80,3 +80,33 @@ def test_truth_settings_are_checked_before_any_work(tmp_path):
 def test_unknown_model_is_a_usage_error():
     r = lamina("list-presets", "--model", "velvet")
     assert r.returncode == 2 and "thin_coat" in r.stderr  # argparse lists the choices
+
+
+def test_make_material_and_compare_take_the_mapping(tmp_path):
+    """``--mapping fitted`` says which mapping renders and both predicted errors; compare reports them per form."""
+    out = tmp_path / "lacquer.blend"
+    r = lamina("make-material", "--model", "thin_coat", "--preset", "amber_lacquer", "--mapping", "fitted", "--out",
+               str(out))
+    assert r.returncode == 0, r.stderr
+    assert "lamina: fitted mapping (predicted mean rel. RMSE on the comparison scenes: analytic" in r.stdout
+    r = lamina("compare", "--model", "thin_coat", "--preset", "amber_lacquer", "--mapping", "auto", "--forms",
+               "nodes,osl", "--scenes", "sphere", "--resolution", "16", "--samples", "4", "--out",
+               str(tmp_path / "cmp"))
+    assert r.returncode == 0, r.stderr
+    report = json.loads((tmp_path / "cmp" / "report.json").read_text())
+    assert report["mapping"] == "auto"
+    for form in ("nodes", "osl"):
+        m = report["mappings"][form]
+        assert m["used"] in ("analytic", "fitted") and set(m["predicted_error"]) == {"analytic", "fitted"}
+        assert f"{form:5s} {m['used']} mapping" in r.stdout
+
+
+def test_the_mapping_is_refused_where_a_model_has_no_fitted_one(tmp_path):
+    r = lamina("compare", "--model", "micrograin", "--preset", "rust_on_metal", "--mapping", "fitted", "--out",
+               str(tmp_path / "x"))
+    assert r.returncode == 2
+    assert r.stderr.strip().splitlines() == ["lamina: error: --mapping: model micrograin has only its analytic "
+                                             "mapping (models with a fitted one: spongecake, thin_coat)"]
+    r = lamina("make-material", "--model", "thin_coat", "--preset", "amber_lacquer", "--mapping", "exact", "--out",
+               str(tmp_path / "x.blend"))
+    assert r.returncode == 2 and "--mapping: invalid choice: 'exact'" in r.stderr

@@ -1,0 +1,185 @@
+"""Which mapping a material renders with: analytic, fitted, or Auto (bpy-free).
+
+``fit_for`` fits the material's fitted mapping against the model's float64 reference (``fitted.fit``), cached by
+content (parameters, form, fitter version) in memory and on disk. ``choose`` measures both mappings on the
+comparison scenes at ``CHOICE_RESOLUTION`` (the scenes and resolution ``make bench`` reports; a smaller furnace)
+and, for Auto, keeps the one with the lower mean error; the analytic one wherever the fitted one is not lower by
+``AUTO_MARGIN``.
+"""
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import MAPPINGS, fittable, fitted, predicted_image
+
+FITTER_VERSION = 1  # bump when fits change, so cached ones are not reused
+CHOICE_RESOLUTION = 48
+CHOICE_FURNACE_WIDTH = 12  # the furnace panorama's width (the bench's is 24: its prediction costs an albedo per pixel)
+AUTO_MARGIN = 0.01  # Auto takes the fitted mapping only where it is lower by this much (absolute rel. RMSE)
+BACKLIT_MIN_MEAN = 1e-3  # a scene whose reference mean is below this is not counted (e.g. backlit opaque stacks)
+REFERENCE_ALBEDO_SAMPLES = 4096  # the reference's directional albedo per fitted view
+SCENE_ALBEDO_SAMPLES = 1024  # per furnace pixel in the choice's scenes
+_fits: dict[str, fitted.Fit] = {}
+
+
+def cache_folder() -> Path:
+    return Path(os.environ.get("LAMINA_CACHE", Path.home() / ".cache" / "lamina")) / "fits"
+
+
+def fit_key(model_id: str, p, form: str) -> str:
+    """What a fit depends on: the parameters, the form, whether node groups have the Metallic BSDF, the fitter."""
+    from .expr import NumpyBackend
+
+    text = json.dumps([FITTER_VERSION, model_id, p.to_dict(), form, NumpyBackend.metallic_node], sort_keys=True)
+    return __import__("hashlib").sha256(text.encode()).hexdigest()[:24]
+
+
+def reference_of(model_id: str):
+    return importlib.import_module(f"..reference.{model_id}", __package__)
+
+
+def fit_for(model_id: str, p, form: str) -> fitted.Fit:
+    """The fitted mapping of ``p`` in ``form`` (cached in memory and in ``cache_folder``; an unreadable cache file is
+    refitted and replaced)."""
+    key = fit_key(model_id, p, form)
+    if key in _fits:
+        return _fits[key]
+    path = cache_folder() / f"{key}.npz"
+    try:
+        with np.load(path) as data:
+            _fits[key] = fitted.Fit.from_arrays(data)
+            return _fits[key]
+    except (OSError, ValueError, KeyError):
+        pass
+    from . import _backend
+
+    ref = reference_of(model_id)
+    result = fitted.fit(lambda wo: _backend(model_id, p, form, wo), lambda wi, wo: ref.eval(p, wi, wo),
+                        lambda wo: ref.furnace_albedo(p, wo, n=REFERENCE_ALBEDO_SAMPLES), form)
+    _cache_write(path, lambda f: np.savez(f, **result.to_arrays()))
+    _fits[key] = result
+    return result
+
+
+def _cache_write(path: Path, write) -> None:
+    """``write(file)`` into a temporary renamed to ``path`` (atomic); a cache that cannot be written is skipped."""
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(tmp, "wb") as f:
+            write(f)
+        os.replace(tmp, path)
+    except OSError:
+        tmp.unlink(missing_ok=True)
+
+
+@dataclass
+class Choice:
+    """The mapping a material renders with: ``used`` ("analytic" or "fitted"), its ``fit`` (None for analytic),
+    and the comparison scenes' errors of both (``errors[mapping][scene]``, ``error[mapping]`` their mean over the
+    scenes that count, ``means[scene]`` the reference's)."""
+    requested: str
+    used: str
+    fit: fitted.Fit | None
+    errors: dict = field(default_factory=dict)
+    error: dict = field(default_factory=dict)
+    means: dict = field(default_factory=dict)
+    seconds: float = 0.0
+
+    @property
+    def note(self) -> str:
+        """Why the errors say little, if they do."""
+        if self.means and not any(m >= BACKLIT_MIN_MEAN for m in self.means.values()):
+            return "the reference is black on every comparison scene: nothing to measure"
+        return ""
+
+    def summary(self) -> str:
+        parts = [f"{m} {100 * e:.1f}%" for m, e in self.error.items()]
+        measured = f" ({', '.join(parts)} rel. RMSE on the comparison scenes)" if parts else ""
+        return f"{self.used} mapping{measured}" + (f"; {self.note}" if self.note else "")
+
+
+def describe(record: dict) -> str:
+    """One line of a material's mapping record (``nodes.material.fit_record``, or a compare report's entry with
+    ``predicted_error``): which mapping renders, both errors, the note."""
+    errors = record.get("predicted_error", record.get("error", {}))
+    shown = ", ".join(f"{name} {100 * e:.1f}%" for name, e in errors.items())
+    note = f"; {record['note']}" if record.get("note") else ""
+    measured = f" (predicted mean rel. RMSE on the comparison scenes: {shown})" if shown else ""
+    return f"{record['used']} mapping{measured}{note}"
+
+
+def comparison_errors(model_id: str, p, shaders: dict, resolution: int = CHOICE_RESOLUTION,
+                      albedo_samples: int = SCENE_ALBEDO_SAMPLES, furnace_width: int | None = CHOICE_FURNACE_WIDTH):
+    """({label: {scene: rel RMSE}}, {scene: reference mean}) of each shader in ``shaders`` ({label: (form, Fit or
+    None)}) against the reference on the comparison scenes (``reference.scenes.comparison_scenes``)."""
+    from ..reference import metrics
+    from ..reference import scenes as ref_scenes
+
+    errors, means = {label: {} for label in shaders}, {}
+    for spec in ref_scenes.comparison_scenes(resolution, furnace_width):
+        image = reference_image(model_id, p, spec, albedo_samples)
+        mask = ref_scenes.scene_mask(spec)
+        means[spec.name] = float(image[mask].mean())
+        for label, (form, fit) in shaders.items():
+            errors[label][spec.name] = metrics.rel_rmse(predicted_image(model_id, p, form, spec, fit), image, mask)
+    return errors, means
+
+
+_references: dict = {}
+
+
+def reference_image(model_id: str, p, spec, albedo_samples: int) -> np.ndarray:
+    """The reference's image of a comparison scene, kept for the last few materials (both forms and both mappings
+    are measured against the same one)."""
+    from ..reference import scenes as ref_scenes
+
+    key = (model_id, json.dumps(p.to_dict(), sort_keys=True), repr(spec), albedo_samples)
+    if key not in _references:
+        if len(_references) > 32:
+            _references.clear()
+        ref = reference_of(model_id)
+        _references[key] = ref_scenes.reference_image(
+            spec, lambda wi, wo: ref.eval(p, wi, wo), bsdf_albedo=lambda wo: ref.furnace_albedo(p, wo, n=albedo_samples))
+    return _references[key]
+
+
+def counted(errors: dict, means: dict) -> float:
+    """The mean error over the scenes whose reference mean reaches ``BACKLIT_MIN_MEAN``."""
+    values = [e for scene, e in errors.items() if means[scene] >= BACKLIT_MIN_MEAN and np.isfinite(e)]
+    return float(np.mean(values)) if values else 0.0
+
+
+def choose(model_id: str, p, form: str, mapping: str = "auto") -> Choice:
+    """The mapping ``p`` renders with in ``form`` for the user's choice ``mapping`` (``MAPPING_KINDS``); models
+    without a fitted mapping, and "analytic", render analytic without measuring anything. The measurements are
+    cached with the fit."""
+    if mapping == "analytic" or not fittable(model_id):
+        return Choice(mapping, "analytic", None)
+    start = time.perf_counter()
+    fit = fit_for(model_id, p, form)
+    errors, means = _measured(model_id, p, form, fit)
+    error = {name: counted(e, means) for name, e in errors.items()}
+    used = "fitted" if mapping == "fitted" or error["fitted"] < error["analytic"] - AUTO_MARGIN else "analytic"
+    return Choice(mapping, used, fit if used == "fitted" else None, errors, error, means,
+                  time.perf_counter() - start)
+
+
+def _measured(model_id: str, p, form: str, fit: fitted.Fit) -> tuple[dict, dict]:
+    """``comparison_errors`` of both mappings, cached beside the fit (``<fit key>.json``)."""
+    path = cache_folder() / f"{fit_key(model_id, p, form)}.json"
+    try:
+        data = json.loads(path.read_text())
+        return data["errors"], data["means"]
+    except (OSError, ValueError, KeyError):
+        pass
+    errors, means = comparison_errors(model_id, p, {"analytic": (form, None), "fitted": (form, fit)})
+    _cache_write(path, lambda f: f.write(json.dumps({"errors": errors, "means": means}).encode()))
+    return errors, means

@@ -1,0 +1,140 @@
+"""The fitted mapping in Cycles (issue 14): both forms render the fitted prediction (its view tables as a Color Ramp
+or an OSL array), a saved file renders without Lamina, and the material keeps its choice and says when it is
+stale."""
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from addon import presets  # noqa: E402
+from addon.models import MODELS  # noqa: E402
+from addon.nodes import material, predicted_image  # noqa: E402
+from addon.operators import blend_io  # noqa: E402
+from addon.reference import scenes as S  # noqa: E402
+
+from renders import relative_error, render  # noqa: E402
+from ui_helpers import panel_text  # noqa: E402
+
+pytestmark = pytest.mark.blender
+SCENES = [S.sphere_scene(resolution=32), S.plane_scene(resolution=(32, 16)), S.backlit_scene(resolution=(32, 16))]
+FURNACE = S.furnace_scene(resolution=(24, 12))
+# a SpongeCake stack whose fit adds closures (refraction about the view, GGX), a thin coat whose fit rescales grey ones
+CASES = [("spongecake", "leaf"), ("thin_coat", "amber_lacquer")]
+
+
+@pytest.fixture(autouse=True)
+def clean_file():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    yield
+
+
+def _params(model_id, name):
+    return MODELS[model_id].params_from_dict(presets.load(model_id, name))
+
+
+@pytest.mark.parametrize("model_id, name", CASES)
+@pytest.mark.parametrize("form", ["nodes", "osl"])
+def test_cycles_renders_the_fitted_prediction(model_id, name, form, tmp_path):
+    p = _params(model_id, name)
+    mat = material.new_material(model_id, p, form, mapping="fitted")
+    fit = material.fit_of(mat)
+    assert fit is not None and material.fit_record(mat)["used"] == "fitted"
+    for spec in SCENES + [FURNACE]:
+        img = render(mat, spec, 128 if spec is FURNACE else 32, tmp_path)
+        error = relative_error(img, predicted_image(model_id, p, form, spec, fit), spec)
+        assert error < 0.02, f"{name} {form} {spec.name}: {error:.4f}"
+
+
+def test_the_material_keeps_its_choice_and_says_when_it_is_stale():
+    model_id, name = CASES[1]
+    p = _params(model_id, name)
+    mat = material.new_material(model_id, p, "nodes", mapping="auto")
+    record = material.fit_record(mat)
+    assert material.mapping_of(mat) == "auto" and record["used"] in ("analytic", "fitted")
+    assert set(record["error"]) == {"analytic", "fitted"}
+    assert not material.fit_is_stale(mat)
+    node = material.shader_node(mat)
+    socket = next(s for s in node.inputs if s.type == "VALUE" and not s.is_linked)
+    socket.default_value = socket.default_value * 0.5 + 0.1
+    assert material.fit_is_stale(mat)
+    material.set_mapping(mat, "auto")  # the refit
+    assert not material.fit_is_stale(mat)
+    material.set_form(mat, "osl")  # the form keeps the mapping
+    assert material.mapping_of(mat) == "auto" and material.form_of(mat) == "osl"
+    material.set_mapping(mat, "analytic")
+    assert material.fit_record(mat) is None and material.fit_of(mat) is None
+
+
+def test_a_saved_fitted_file_renders_the_same_without_lamina(tmp_path):
+    """Rendered here (Lamina loaded) and in a fresh process where Lamina cannot be imported."""
+    model_id, name = CASES[0]
+    blend = tmp_path / "m.blend"
+    blend_io.write_material_blend(model_id, _params(model_id, name), "nodes", name, str(blend), mapping="fitted")
+    script = textwrap.dedent(f"""
+        def render(blend, out):
+            import bpy
+            bpy.ops.wm.open_mainfile(filepath=blend)
+            scene = bpy.data.scenes["Lamina {name}"]
+            scene.render.resolution_x = scene.render.resolution_y = 32
+            scene.cycles.samples = 16
+            scene.render.image_settings.file_format = "OPEN_EXR"
+            scene.render.filepath = out
+            bpy.ops.render.render(write_still=True, scene=scene.name)
+    """)
+    namespace = {}
+    exec(script, namespace)
+    here = tmp_path / "here.exr"
+    namespace["render"](str(blend), str(here))
+    assert any("fitted" in g.name for g in bpy.data.node_groups)
+    script += textwrap.dedent("""
+        import sys
+        render(sys.argv[1], sys.argv[2])
+        print("LAMINA_MODULES", [m for m in sys.modules if m == "addon" or m.startswith("addon.") or "lamina" in m])
+    """)
+    fresh = tmp_path / "fresh.exr"
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    r = subprocess.run([sys.executable, "-c", script, str(blend), str(fresh)], capture_output=True, text=True,
+                       cwd=str(tmp_path), timeout=300, env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "LAMINA_MODULES []" in r.stdout
+    from addon.bake.exr import read_exr
+
+    a, b = read_exr(here, "RGB"), read_exr(fresh, "RGB")
+    assert a.mean() > 1e-3
+    np.testing.assert_array_equal(a, b)
+
+
+def test_an_animated_or_linked_input_falls_back_to_the_analytic_mapping_with_a_note():
+    model_id, name = CASES[1]
+    mat = material.new_material(model_id, _params(model_id, name), "nodes", mapping="fitted")
+    node = material.shader_node(mat)
+    socket = next(s for s in node.inputs if s.type == "VALUE")
+    socket.keyframe_insert("default_value", frame=1)
+    assert material.driven_inputs(mat) == [socket.name]
+    assert material.fit_is_stale(mat)  # the fitted tables hold for the constant value only
+    material.set_mapping(mat, "fitted")
+    record = material.fit_record(mat)
+    assert record["used"] == "analytic" and socket.name in record["note"] and material.fit_of(mat) is None
+    assert not material.fit_is_stale(mat)
+
+
+def test_the_mapping_operator_and_panel(registered):
+    """Headless, the operator fits at once (no window: no modal run); the panel draws the three choices, both
+    predicted errors, and a Refit once a value changed."""
+    model_id, name = CASES[1]
+    mat = material.new_material(model_id, _params(model_id, name), "nodes")
+    assert material.fit_record(mat) is None  # the Python API's default: analytic, nothing measured
+    with bpy.context.temp_override(material=mat):
+        assert bpy.ops.lamina.set_mapping(mapping="auto") == {"FINISHED"}
+    assert material.mapping_of(mat) == "auto" and material.fit_record(mat) is not None
+    drawn = panel_text(mat)
+    assert "Analytic" in drawn and "Fitted" in drawn and "Auto" in drawn
+    assert "Predicted error: analytic" in drawn and "Renders the" in drawn and "Refit" not in drawn
+    socket = next(s for s in material.shader_node(mat).inputs if s.type == "VALUE" and not s.is_linked)
+    socket.default_value = socket.default_value * 0.5 + 0.1
+    assert "Refit" in panel_text(mat)
