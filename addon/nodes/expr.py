@@ -106,12 +106,13 @@ class NumpyBackend(NumpyMath):
         angle = np.broadcast_to(angle, (self.n,))
         return np.stack([np.cos(angle), np.sin(angle), np.zeros(self.n)], axis=1)
 
-    def view_table(self, values):
-        """The piecewise linear function of cos θo through ``values`` (K, 3) on K uniform knots in [0, 1]."""
+    def ramp(self, values, x):
+        """The piecewise linear colour through ``values`` (K, 3) on K uniform knots in [0, 1], at ``x`` clamped to
+        [0, 1] (a Color Ramp)."""
         values = np.asarray(values, dtype=np.float64)
         knots = np.linspace(0.0, 1.0, len(values))
-        mu = np.clip(self.wo[:, 2], 0.0, 1.0)
-        return np.stack([np.interp(mu, knots, values[:, c]) for c in range(3)], axis=1)
+        x = np.clip(np.broadcast_to(x, (self.n,)), 0.0, 1.0)
+        return np.stack([np.interp(x, knots, values[:, c]) for c in range(3)], axis=1)
 
     def has_metal(self) -> bool:
         """Whether the predicted form has ``metal`` (OSL; node groups on Blender 4.3+)."""
@@ -368,16 +369,16 @@ class OslBackend:
     def has_metal(self) -> bool:
         return True
 
-    def view_table(self, values):
-        """``NumpyBackend.view_table``: a constant array of colours, interpolated linearly."""
+    def ramp(self, values, x):
+        """``NumpyBackend.ramp``: a constant array of colours, interpolated linearly."""
         values = np.asarray(values, dtype=np.float64)
         self._count += 1
         name, last = f"table{self._count}", len(values) - 1
         entries = ", ".join(_osl(tuple(v)).code for v in values)
         self.lines.append(f"color {name}[{len(values)}] = {{{entries}}};")
-        x = self._let(OslValue(f"clamp(dot(N, I), 0.0, 1.0) * {_num(last)}", "float"))
-        i = self._let(OslValue(f"min((int)floor({x.code}), {last - 1})", "int"))
-        return self._let(OslValue(f"mix({name}[{i.code}], {name}[{i.code} + 1], {x.code} - {i.code})", "color"))
+        t = self._let(OslValue(f"clamp({_osl(x).code}, 0.0, 1.0) * {_num(last)}", "float"))
+        i = self._let(OslValue(f"min((int)floor({t.code}), {last - 1})", "int"))
+        return self._let(OslValue(f"mix({name}[{i.code}], {name}[{i.code} + 1], {t.code} - {i.code})", "color"))
 
     def step_below(self, x, edge):
         return self._let(OslValue(f"({_osl(x).code} < {_osl(edge).code} ? 1.0 : 0.0)", "float"))

@@ -7,8 +7,8 @@ by an RGB table over the view cosine; it may add up to ``MAX_EXTRAS`` closures f
 translucency, GGX around the normal, Beckmann refraction around the view), each with an RGB weight
 table. Per tabulated view cosine the weights minimise the cosine-weighted error against the reference over (ωi, ωo)
 (non-negative least squares), with the reference's own directional albedo matched (a heavily weighted row). The
-forward model is ``closures_np``: the fit optimises what Cycles renders. Tables are piecewise linear in cos θo on
-``KNOTS`` uniform knots (a Color Ramp in node groups, a constant array in OSL: both exact).
+forward model is ``closures_np``: the fit optimises what Cycles renders. Tables are piecewise linear in √cos θo on
+``KNOTS`` uniform knots (``view_cosines``; a Color Ramp in node groups, a constant array in OSL: both exact).
 
 Quadrature over ωi: a Fibonacci sphere plus samples of each narrow closure's own microfacet distribution, combined
 by the balance heuristic (multiple importance sampling), at ``AZIMUTHS`` view azimuths per knot: deterministic.
@@ -24,8 +24,8 @@ import numpy as np
 
 from . import closures_np
 
-KNOTS = 16  # view cosines 0, 1/15, ..., 1 (the first evaluated at MIN_KNOT_COS)
-MIN_KNOT_COS = 0.02
+KNOTS = 16  # tabulated views (``view_cosines``)
+MIN_KNOT_COS = 0.02  # views closer to grazing take the first knot's values
 AZIMUTHS = 4  # view azimuths per knot (anisotropic materials; one suffices for isotropic ones)
 UNIFORM = 1024  # Fibonacci-sphere directions per view
 LOBE = 256  # samples per narrow closure per view
@@ -41,9 +41,16 @@ PEAK_DAMPING = 1.0  # residuals relative to the reference plus its mean level (p
 
 
 def view_cosines() -> np.ndarray:
-    mu = np.linspace(0.0, 1.0, KNOTS)
-    mu[0] = MIN_KNOT_COS
-    return mu
+    """The view cosine of each knot: uniform in √cos θo from √``MIN_KNOT_COS`` to 1 (dense at grazing views, where
+    the layers change fastest)."""
+    return np.linspace(math.sqrt(MIN_KNOT_COS), 1.0, KNOTS) ** 2
+
+
+def table_coordinate(b):
+    """The tables' coordinate on backend ``b``: 0 at ``MIN_KNOT_COS`` (and below), 1 at normal view, uniform in
+    √cos θo (``view_cosines``)."""
+    root = math.sqrt(MIN_KNOT_COS)
+    return (b.sqrt(b.cos_view()) - root) * (1.0 / (1.0 - root))
 
 
 # ------------------------------------------------------------------------------ the extra closures
@@ -410,9 +417,10 @@ class ScaledBackend:
     """A backend that passes everything to ``b`` but gathers the closures by atom (``Fit.groups``): one closure
     per atom, its members' colours summed, times the atom's fitted table; ``flush`` emits them."""
 
-    def __init__(self, b, fit: Fit):
+    def __init__(self, b, fit: Fit, coordinate):
         self._b = b
         self._fit = fit
+        self.coordinate = coordinate  # ``table_coordinate``
         self._next = 0
         self._atoms: dict[int, list] = {}  # atom -> [method, summed colour, args, kw]
 
@@ -433,16 +441,16 @@ class ScaledBackend:
 
     def flush(self) -> None:
         for g, (method, color, args, kw) in self._atoms.items():
-            method(color * self._b.view_table(self._fit.scales[g]), *args, **kw)
+            method(color * self._b.ramp(self._fit.scales[g], self.coordinate), *args, **kw)
 
 
 def shade(b, mapping, p, fit: Fit) -> None:
     """The fitted mapping of ``p`` on backend ``b`` (module docstring)."""
-    scaled = ScaledBackend(b, fit)
+    scaled = ScaledBackend(b, fit, table_coordinate(b))
     mapping.shade(scaled, p)
     scaled.flush()
     for (kind, kw), weights in zip(fit.extras, fit.extra_weights):
-        color = b.view_table(weights)
+        color = b.ramp(weights, scaled.coordinate)
         if kind == "ggx":
             b.glossy(color, kw["alpha"], kw["alpha"], b.normal())
         elif kind == "beckmann_refraction":

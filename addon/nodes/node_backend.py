@@ -239,14 +239,10 @@ class NodeBackend:
         t = NodeValue(self, self.geometry()[2], "color", 1)
         return self.scale(t, self.cos(angle)) + self.scale(self._vector("CROSS_PRODUCT", n, t), self.sin(angle))
 
-    def view_table(self, values):
-        """``expr.NumpyBackend.view_table`` as a Color Ramp (linear) with a stop per knot, fed the view cosine:
-        Cycles tabulates a ramp at 256 points and interpolates linearly, so stops at i / 15 (multiples of 1/255) are
-        reproduced exactly."""
-        normal, incoming = self.geometry()[:2]
-        mu = self._vector("DOT_PRODUCT", NodeValue(self, normal, "color", 1), NodeValue(self, incoming, "color", 1),
-                          out="Value")
-        ramp = self._node("ShaderNodeValToRGB", mu.depth + 1)
+    def ramp(self, values, x):
+        """``expr.NumpyBackend.ramp`` as a Color Ramp (linear) with a stop per knot: Cycles tabulates a ramp at 256
+        points and interpolates linearly, so 16 stops at i / 15 (multiples of 1/255) are reproduced exactly."""
+        ramp = self._node("ShaderNodeValToRGB", _depth(x))
         ramp.color_ramp.interpolation = "LINEAR"
         elements = ramp.color_ramp.elements  # a new ramp has stops at 0 and 1; the others are inserted in order
         last = len(values) - 1
@@ -254,8 +250,8 @@ class NodeBackend:
             elements.new(i / last)
         for element, value in zip(elements, values):
             element.color = (*(float(v) for v in value), 1.0)
-        self.links.new(mu.socket, ramp.inputs["Fac"])
-        return NodeValue(self, ramp.outputs["Color"], "color", mu.depth + 1)
+        self._link_or_set(x, ramp.inputs["Fac"])
+        return NodeValue(self, ramp.outputs["Color"], "color", _depth(x))
 
     @staticmethod
     def has_metal() -> bool:

@@ -48,10 +48,10 @@ def test_a_failing_bulk_leaves_the_material_untouched(monkeypatch):
     stored = mat["lamina"]
     build = material._new_node
 
-    def refuse_the_bulk(m, mapping_id, p, form):
+    def refuse_the_bulk(m, mapping_id, p, form, fit=None):
         if mapping_id != model.ID:
             raise RuntimeError("bulk generation failed")
-        return build(m, mapping_id, p, form)
+        return build(m, mapping_id, p, form, fit)
 
     monkeypatch.setattr(material, "_new_node", refuse_the_bulk)
     with pytest.raises(RuntimeError, match="bulk generation failed"):

@@ -64,15 +64,9 @@ def test_the_fitter_recovers_a_mixture_it_generated(form):
         for g, (_, color, _) in zip(groups, fitted._fitted_closures(recorded)):
             carried[g, k] += np.abs(color).max()
     live = carried[:, :, None] > 1e-3 * carried.max()
-    assert np.abs(np.where(live, got.scales / _at_fitted_views(scales) - 1.0, 0.0)).max() < 0.01
-    assert np.abs(got.extra_weights / _at_fitted_views(weights) - 1.0).max() < 0.01
+    assert np.abs(np.where(live, got.scales / scales - 1.0, 0.0)).max() < 0.01
+    assert np.abs(got.extra_weights / weights - 1.0).max() < 0.01
 
-
-def _at_fitted_views(tables):
-    """The tables' values at the views the fit uses (the first knot holds the value at ``MIN_KNOT_COS``)."""
-    out = tables.copy()
-    out[:, 0] += (tables[:, 1] - tables[:, 0]) * fitted.MIN_KNOT_COS * (fitted.KNOTS - 1)
-    return out
 
 
 def test_auto_keeps_the_analytic_mapping_where_it_is_exact():
@@ -146,16 +140,20 @@ def test_bad_materials_give_finite_non_negative_closures_and_a_message(name):
 
 
 def test_both_forms_get_the_tables():
-    """The OSL source carries a constant array per table (16 colours); the numpy backend interpolates them."""
+    """The OSL source carries a constant array per table (16 colours); the numpy backend interpolates them, in
+    √cos θo from the first knot's view to normal view."""
     p = _preset(thin_coat, "amber_lacquer")
     fit = choice.fit_for(thin_coat.ID, p, "osl")
     b = OslBackend([(s.name, s.kind, s.param.default) for s in thin_coat_sockets(p)])
     fitted.shade(b, __import__("addon.nodes", fromlist=["MAPPINGS"]).MAPPINGS[thin_coat.ID], p, fit)
     source = b.source("t", "//")
     assert source.count(f"[{fitted.KNOTS}] = {{") == len(fit.scales) + len(fit.extras)
-    n = NumpyBackend(np.array([[0.0, 0.0, 1.0], [0.8, 0.0, 0.6]]), {}, "osl")
-    table = np.linspace(0.0, 1.0, fitted.KNOTS)[:, None] * np.array([1.0, 2.0, 3.0])
-    np.testing.assert_allclose(n.view_table(table), [[1.0, 2.0, 3.0], [0.6, 1.2, 1.8]])
+    mu = fitted.view_cosines()
+    wo = np.stack([np.sqrt(1.0 - mu * mu), np.zeros_like(mu), mu], axis=1)
+    n = NumpyBackend(np.concatenate([wo, [[1.0, 0.0, 0.0]]]), {}, "osl")
+    table = np.arange(fitted.KNOTS)[:, None] * np.array([1.0, 2.0, 3.0])
+    np.testing.assert_allclose(n.ramp(table, fitted.table_coordinate(n)), np.concatenate([table, table[:1]]),
+                               atol=1e-9)
 
 
 def thin_coat_sockets(p):
