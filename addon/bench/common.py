@@ -53,8 +53,8 @@ def approximation_header(model_id: str, short: bool = False) -> list[str]:
 
 
 def _fitted_errors(model_id: str, p, resolution: int) -> dict:
-    """{scene: rel RMSE} of the OSL form's fitted mapping of ``p``."""
-    fit = choice.fit_for(model_id, p, "osl")
+    """{scene: rel RMSE} of the OSL form's fitted mapping of ``p`` (the closer of its fits, ``choice.choose``)."""
+    fit = choice.choose(model_id, p, "osl", "fitted").fit
     return comparison_errors(model_id, p, {"fitted": ("osl", fit)}, resolution, ALBEDO_SAMPLES,
                              furnace_width=None)[0]["fitted"]
 
@@ -75,19 +75,22 @@ def mapping_section(model, resolution: int) -> list[str]:
              + f" (backlit only where the reference's mean reaches {choice.BACKLIT_MIN_MEAN:g}).", "",
              "| preset | scene | ref. mean | OSL analytic | OSL Auto | node group analytic | node group Auto | goal |",
              "|---|---|---|---|---|---|---|---|"]
-    summary = ["", "| preset | form | Auto renders | closures analytic → fitted | fit s | measure s |",
+    summary = ["", f"Fit s: both fits ({', '.join(f'{d:g}' for d in choice.DAMPINGS)} weightings, `nodes.choice`) "
+               "from scratch; measure s: the analytic mapping and both fits on the comparison scenes.", "",
+               "| preset | form | Auto renders | closures analytic → fitted | fit s | measure s |",
                "|---|---|---|---|---|---|"]
     with fresh_fit_cache():
         for name in presets.names(model.ID):
             p = model.params_from_dict(presets.load(model.ID, name))
             chosen = {}
             for form in ("osl", "nodes"):
-                fit_seconds = timed(lambda: choice.fit_for(model.ID, p, form))
+                fit_seconds = timed(lambda: [choice.fit_for(model.ID, p, form, d) for d in choice.DAMPINGS])
                 start = time.perf_counter()
                 chosen[form] = choice.choose(model.ID, p, form, "auto")
+                fit = choice.choose(model.ID, p, form, "fitted").fit
                 summary.append(f"| {name} | {form} | {chosen[form].used} | {_closures(model.ID, p, form, None)} → "
-                               f"{_closures(model.ID, p, form, choice.fit_for(model.ID, p, form))} | "
-                               f"{fit_seconds:.1f} | {time.perf_counter() - start:.1f} |")
+                               f"{_closures(model.ID, p, form, fit)} | {fit_seconds:.1f} | "
+                               f"{time.perf_counter() - start:.1f} |")
             shaders = {f"{form} {m}": (form, chosen[form].fit if m == "auto" else None)
                        for form in ("osl", "nodes") for m in ("analytic", "auto")}
             errors, means = comparison_errors(model.ID, p, shaders, resolution, ALBEDO_SAMPLES, furnace_width=None)

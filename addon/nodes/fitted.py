@@ -30,14 +30,14 @@ AZIMUTHS = 4  # view azimuths per knot (anisotropic materials; one suffices for 
 UNIFORM = 1024  # Fibonacci-sphere directions per view
 LOBE = 256  # samples per narrow closure per view
 NARROW = 0.5  # closures of roughness below this get samples of their own
+STRAIGHT_ALPHA = 0.25  # the width of the samples about the straight-through direction
 MAX_EXTRAS = 2
 ALBEDO_WEIGHT = 3.0  # the directional-albedo row's weight against the relative L2 residual
 RIDGE = 1e-5  # pull towards the analytic mapping (scales 1, extras 0) where the data leave weights free
 EXTRA_GAIN = 0.05  # an extra closure must lower the fit's error by this share to be kept,
 MIN_GAIN = 0.005  # and by this much (relative RMSE)
-FIXED = ("transparent",)
+FIXED = ("transparent",)  # exact closures (a Dirac): never rescaled
 SHAPELESS = ("diffuse", "translucent")  # closures without a shape: the dictionary's are not added beside them
-PEAK_DAMPING = 1.0  # residuals relative to the reference plus its mean level (peaks do not swamp the rest)  # exact closures (a Dirac): never rescaled
 
 
 def view_cosines() -> np.ndarray:
@@ -103,12 +103,14 @@ def _frame(normal, tangent):
 
 @dataclass(frozen=True)
 class Lobe:
-    """A narrow reflection lobe to importance-sample: slopes of GGX (or Beckmann) (αx, αy) about ``normal``."""
+    """A narrow lobe to importance-sample: slopes of GGX (or Beckmann) (αx, αy) about ``normal``, the sampled
+    microfacet normal reflecting ωo, or (``through``) itself the direction (a cone about ``normal``)."""
     normal: np.ndarray  # (3,)
     tangent: np.ndarray  # (3,)
     alpha_x: float
     alpha_y: float
     beckmann: bool
+    through: bool = False
 
     def _local(self, v):
         t, b, n = _frame(self.normal[None], self.tangent[None])
@@ -121,11 +123,11 @@ class Lobe:
         sx, sy = self.alpha_x * radius * np.cos(phi), self.alpha_y * radius * np.sin(phi)
         h = -sx[:, None] * t - sy[:, None] * b + n
         h /= np.linalg.norm(h, axis=1, keepdims=True)
-        return 2.0 * (h @ wo)[:, None] * h - wo
+        return h if self.through else 2.0 * (h @ wo)[:, None] * h - wo
 
     def pdf(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        h = wi + wo
-        h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-300)
+        h = wi if self.through else wi + wo
+        h = h / np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-300)
         hl = self._local(h)
         ok = hl[:, 2] > 1e-9
         hz = np.where(ok, hl[:, 2], 1.0)
@@ -134,7 +136,8 @@ class Lobe:
             d = np.exp(-t2) / (math.pi * self.alpha_x * self.alpha_y * hz ** 4)
         else:
             d = closures_np.ggx_d(np.where(ok[:, None], hl, [[0.0, 0.0, 1.0]]), self.alpha_x, self.alpha_y)
-        return np.where(ok, d * hz / np.maximum(4.0 * np.abs(np.einsum("ij,ij->i", h, wo)), 1e-300), 0.0)
+        jacobian = 1.0 if self.through else 1.0 / np.maximum(4.0 * np.abs(np.einsum("ij,ij->i", h, wo)), 1e-300)
+        return np.where(ok, d * hz * jacobian, 0.0)
 
 
 def narrow_lobes(closures, view: int) -> list[Lobe]:
@@ -161,9 +164,10 @@ def narrow_lobes(closures, view: int) -> list[Lobe]:
 
 
 def quadrature(wo: np.ndarray, lobes: list[Lobe], seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Directions ωi and weights (∫ g dωi ≈ Σ w g) for one view: the Fibonacci sphere and each lobe's samples,
-    balance heuristic."""
+    """Directions ωi and weights (∫ g dωi ≈ Σ w g) for one view: the Fibonacci sphere, each lobe's samples and a
+    cone about the straight-through direction −ωo (transmission peaks), balance heuristic."""
     rng = np.random.default_rng(seed)
+    lobes = lobes + [Lobe(-wo, np.array([1.0, 0.0, 0.0]), STRAIGHT_ALPHA, STRAIGHT_ALPHA, False, through=True)]
     parts = [fibonacci_sphere(UNIFORM)]
     for lobe in lobes:
         parts.append(lobe.sample(wo, rng.random((LOBE, 2))))
@@ -297,7 +301,7 @@ class _Normal:
     albedo_target: np.ndarray  # (V,)
 
 
-def _knot_systems(backend_of, ref_eval, ref_albedo, mu, groups, extras) -> list[_Normal]:
+def _knot_systems(backend_of, ref_eval, ref_albedo, mu, groups, extras, damping: float) -> list[_Normal]:
     """The three channels' problems at view cosine ``mu`` (views at ``AZIMUTHS`` azimuths)."""
     rows, targets, albedo_atoms, albedo_targets = [], [], [], []
     for v, wo in enumerate(_views(mu)):
@@ -308,7 +312,7 @@ def _knot_systems(backend_of, ref_eval, ref_albedo, mu, groups, extras) -> list[
         a = _atoms(recorded, groups, extras, wi, wo_s)
         f = ref_eval(wi, wo_s)
         level = max(float(np.mean(ref_albedo(wo[None])[0])) / math.pi, 1e-6)
-        r = np.sqrt(w) * np.abs(wi[:, 2]) / (level + f.mean(axis=1) * np.abs(wi[:, 2])) ** PEAK_DAMPING
+        r = np.sqrt(w) * np.abs(wi[:, 2]) / (level + f.mean(axis=1) * np.abs(wi[:, 2])) ** damping
         rows.append(a * r[:, None, None])
         targets.append(f * r[:, None])
         for side in (wi[:, 2] > 0.0, wi[:, 2] < 0.0):  # reflection and transmission albedo, each matched
@@ -374,10 +378,12 @@ def _grey(kind: str, kw: dict, form: str) -> bool:
     return form == "nodes" and (kind == "conductor" or (kind == "beckmann" and kw.get("eta") is not None))
 
 
-def fit(backend_of, ref_eval, ref_albedo, form: str) -> Fit:
+def fit(backend_of, ref_eval, ref_albedo, form: str, damping: float = 1.0) -> Fit:
     """Fit the mapping whose view-only closures ``backend_of(wo)`` records (a ``NumpyBackend`` after ``shade``)
     against the reference ``ref_eval(wi, wo)`` (N, 3) and directional albedo ``ref_albedo(wo)`` (N, 3): up to
-    ``MAX_EXTRAS`` extra closures chosen greedily, each kept only if it lowers the error by ``EXTRA_GAIN``."""
+    ``MAX_EXTRAS`` extra closures chosen greedily, each kept only if it lowers the error by ``EXTRA_GAIN``. The
+    residual at each direction is divided by (the reference's mean level + its value)^``damping``: 1 weighs
+    relative errors (a peak counts no more than the dim rest), 0 absolute ones."""
     closures = _fitted_closures(backend_of(np.array([[0.0, 0.0, 1.0]])).closures)
     groups = atom_groups(backend_of)
     present = {kind for kind, _, _ in closures}
@@ -386,7 +392,7 @@ def fit(backend_of, ref_eval, ref_albedo, form: str) -> Fit:
     grey = np.zeros(n_analytic + len(extras), dtype=bool)
     for g, (kind, _, kw) in zip(groups, closures):
         grey[g] = _grey(kind, kw, form)
-    systems = [_knot_systems(backend_of, ref_eval, ref_albedo, mu, groups, extras) for mu in view_cosines()]
+    systems = [_knot_systems(backend_of, ref_eval, ref_albedo, mu, groups, extras, damping) for mu in view_cosines()]
     use = np.arange(n_analytic + len(extras)) < n_analytic
     error_analytic = _error(systems, [np.tile(use.astype(float), (3, 1))] * len(systems))
     best = _solve_all(systems, use, grey, n_analytic)
@@ -440,8 +446,10 @@ class ScaledBackend:
         return gathered
 
     def flush(self) -> None:
+        """Emit one closure per atom; an atom the fit set to zero at every view is left out."""
         for g, (method, color, args, kw) in self._atoms.items():
-            method(color * self._b.ramp(self._fit.scales[g], self.coordinate), *args, **kw)
+            if self._fit.scales[g].max() > 0.0:
+                method(color * self._b.ramp(self._fit.scales[g], self.coordinate), *args, **kw)
 
 
 def shade(b, mapping, p, fit: Fit) -> None:
@@ -450,6 +458,8 @@ def shade(b, mapping, p, fit: Fit) -> None:
     mapping.shade(scaled, p)
     scaled.flush()
     for (kind, kw), weights in zip(fit.extras, fit.extra_weights):
+        if weights.max() <= 0.0:
+            continue
         color = b.ramp(weights, scaled.coordinate)
         if kind == "ggx":
             b.glossy(color, kw["alpha"], kw["alpha"], b.normal())

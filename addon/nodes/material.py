@@ -20,10 +20,13 @@ import bpy
 from ..models import MODELS
 from ..models.micrograin import WRAPPED, Bulk
 from . import FORMS, MAPPING_KINDS, MAPPINGS, choice, fittable, fitted, osl, shade
-from .expr import BULK_INPUT, TANGENT_INPUT, OslBackend
+from .expr import BULK_INPUT, TANGENT_INPUT, NumpyBackend, OslBackend
 from .node_backend import NodeBackend
 
 GENERATOR_VERSION = 2  # bump when generated shaders change, so cached groups are not reused
+# What the numpy prediction (and so a fit) assumes of node groups follows the running Blender: 4.2 has no Metallic
+# BSDF node.
+NumpyBackend.metallic_node = NodeBackend.has_metal()
 SOCKET_TYPES = {"float": "NodeSocketFloat", "color": "NodeSocketColor", "vector": "NodeSocketVector",
                 "shader": "NodeSocketShader"}
 

@@ -129,12 +129,13 @@ def add_material(op, context, model_id: str, data: dict, name: str) -> set:
 
 
 def choose_mapping(context, mat, mapping: str) -> None:
-    """Give ``mat`` the ``mapping``: fitted and measured in the background with a progress bar where there is a
-    window (the material renders as it is until then), at once otherwise."""
-    if context.window is not None:
-        bpy.ops.lamina.set_mapping("INVOKE_DEFAULT", mapping=mapping, material=mat.name)
-    else:
+    """Give ``mat`` the ``mapping``: fitted and measured in a thread with a progress bar in the UI (the material
+    renders as it is until then), at once in background mode (no event loop to finish a modal operator)."""
+    if bpy.app.background or context.window is None:
         lamina_material.set_mapping(mat, mapping)
+        return
+    with context.temp_override(material=mat):
+        bpy.ops.lamina.set_mapping("INVOKE_DEFAULT", mapping=mapping, material=mat.name)
 
 
 def warn_if_osl_is_off(op, context, form: str) -> None:
@@ -201,9 +202,10 @@ class LAMINA_OT_set_mapping(bpy.types.Operator):
         return {"FINISHED"}
 
     def invoke(self, context, event):
-        """Fit and measure in a thread (numpy only), then rebuild on the main thread from the cache."""
+        """Fit and measure in a thread (numpy only), then rebuild on the main thread from the cache (in background
+        mode, at once: no event loop runs a modal operator there)."""
         mat = self._material(context)
-        if not lamina_material.is_lamina(mat) or self.mapping == "analytic":
+        if not lamina_material.is_lamina(mat) or self.mapping == "analytic" or bpy.app.background:
             return self.execute(context)
         model_id, p = lamina_material.current_params(mat)
         if not fittable(model_id):

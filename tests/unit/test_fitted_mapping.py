@@ -88,7 +88,7 @@ def test_auto_takes_the_fitted_mapping_where_it_is_closer():
 def test_fits_are_deterministic_and_cached(monkeypatch):
     p = _preset(thin_coat, "rough_over_smooth")
     first = choice.fit_for(thin_coat.ID, p, "nodes")
-    files = list(choice.cache_folder().glob("*.npz"))
+    files = list(choice.cache_folder().glob("*.npz"))  # the default weighting's
     assert len(files) == 1
     with monkeypatch.context() as m:
         m.setattr(choice, "_fits", {})
@@ -143,7 +143,7 @@ def test_both_forms_get_the_tables():
     """The OSL source carries a constant array per table (16 colours); the numpy backend interpolates them, in
     √cos θo from the first knot's view to normal view."""
     p = _preset(thin_coat, "amber_lacquer")
-    fit = choice.fit_for(thin_coat.ID, p, "osl")
+    fit = choice.choose(thin_coat.ID, p, "osl", "fitted").fit
     b = OslBackend([(s.name, s.kind, s.param.default) for s in thin_coat_sockets(p)])
     fitted.shade(b, __import__("addon.nodes", fromlist=["MAPPINGS"]).MAPPINGS[thin_coat.ID], p, fit)
     source = b.source("t", "//")
