@@ -115,12 +115,21 @@ def test_an_animated_or_linked_input_falls_back_to_the_analytic_mapping_with_a_n
     node = material.shader_node(mat)
     socket = next(s for s in node.inputs if s.type == "VALUE")
     socket.keyframe_insert("default_value", frame=1)
-    assert material.driven_inputs(mat) == [socket.name]
+    animated = socket.name
+    assert material.driven_inputs(mat) == [animated]
     assert material.fit_is_stale(mat)  # the fitted tables hold for the constant value only
     material.set_mapping(mat, "fitted")
     record = material.fit_record(mat)
-    assert record["used"] == "analytic" and socket.name in record["note"] and material.fit_of(mat) is None
+    assert record["used"] == "analytic" and animated in record["note"] and material.fit_of(mat) is None
     assert not material.fit_is_stale(mat)
+    other = next(s for s in material.shader_node(mat).inputs if s.type == "VALUE" and s.name != animated)
+    value = mat.node_tree.nodes.new("ShaderNodeValue")  # a linked input (a texture would do the same)
+    mat.node_tree.links.new(value.outputs[0], other)
+    linked = other.name
+    assert linked in material.driven_inputs(mat)
+    material.set_mapping(mat, "auto")  # the rebuilt node keeps the link
+    record = material.fit_record(mat)
+    assert record["used"] == "analytic" and linked in record["note"]
 
 
 def test_the_mapping_operator_and_panel(registered):

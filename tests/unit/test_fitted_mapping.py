@@ -160,3 +160,17 @@ def thin_coat_sockets(p):
     from addon.nodes import thin_coat as mapping
 
     return mapping.sockets(p)
+
+
+def test_a_closure_the_node_group_weighs_in_grey_gets_a_grey_table():
+    """The node group takes a Beckmann reflection with a Fresnel (the coat's top) through grey Mix Shaders: its
+    fitted scale is the same in every channel, so both forms render what the fit predicts."""
+    p = _preset(thin_coat, "amber_lacquer")
+    backend_of = _backend_of(thin_coat.ID, p, "nodes")
+    fit = choice.fit_for(thin_coat.ID, p, "nodes")
+    closures = fitted._fitted_closures(backend_of(np.array([[0.0, 0.0, 1.0]])).closures)
+    grey = {g for g, (kind, _, kw) in zip(fit.groups, closures) if fitted._grey(kind, kw, "nodes")}
+    assert grey
+    for g in grey:
+        np.testing.assert_array_equal(fit.scales[g][:, 0], fit.scales[g][:, 2])
+    assert any(np.ptp(fit.scales[g], axis=1).max() > 1e-3 for g in set(fit.groups) - grey)
