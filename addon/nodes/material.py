@@ -4,8 +4,10 @@ Node groups and OSL texts are named with a ``Lamina`` prefix and reused per cont
 operator never duplicates them. Parameter values live on the group or script node's inputs; the model dict
 is kept in the material's ``lamina`` property so the other form can be generated from the current values.
 With multiple scattering, the network's prediction is baked into the node's ``MS`` inputs and the material's
-``lamina_ms_key`` property records which parameters (and networks) it was baked for. Switching form or
-multiple scattering replaces only Lamina's own nodes; the user's nodes and links around them stay (``_replace``).
+``lamina_ms_key`` property records which parameters (and networks) it was baked for. Switching form, mapping or
+multiple scattering replaces only Lamina's own nodes; the user's nodes and links around them stay, and keys and
+drivers on the Lamina node's inputs move to the new node (``_replace``). The mapping (analytic, fitted, Auto;
+``choice``) is chosen at each rebuild and recorded in ``lamina_fit`` with the fit it renders.
 """
 from __future__ import annotations
 
@@ -272,6 +274,23 @@ def driven_inputs(mat) -> list[str]:
     return sorted(names)
 
 
+def _move_animation(tree, old, node) -> None:
+    """Point the F-curves and drivers of ``old``'s inputs at ``node``'s inputs of the same name (``node`` still has its
+    own name; renaming it later carries them along), so that removing ``old`` does not delete the user's keys."""
+    animation = tree.animation_data
+    if animation is None:
+        return
+    prefix = f'nodes["{old.name}"].inputs['
+    by_name = {_norm(socket.name): j for j, socket in enumerate(node.inputs)}
+    for curve in list(animation.drivers) + _fcurves(animation.action):
+        if not curve.data_path.startswith(prefix):
+            continue
+        index, _, rest = curve.data_path[len(prefix):].partition("]")
+        name = old.inputs[int(index)].name if index.isdigit() else index.strip('"')
+        if _norm(name) in by_name:
+            curve.data_path = f'nodes["{node.name}"].inputs[{by_name[_norm(name)]}]{rest}'
+
+
 def _fcurves(action) -> list:
     """An action's F-curves: Blender 4.2's ``action.fcurves``, or 4.4+'s layered channel bags."""
     if action is None:
@@ -518,6 +537,7 @@ def _replace(mat, old, node, name: str = "Lamina") -> None:
                 outputs.append((_norm(socket.name), link.to_socket, link.is_muted))
         baked = [n for n in tree.nodes if n.get(BAKE_TAG) and any(o.is_linked for o in n.outputs)]
         active = tree.nodes.active == old
+        _move_animation(tree, old, node)
         tree.nodes.remove(old)
         if active:
             tree.nodes.active = node

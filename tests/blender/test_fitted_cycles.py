@@ -121,6 +121,7 @@ def test_an_animated_or_linked_input_falls_back_to_the_analytic_mapping_with_a_n
     material.set_mapping(mat, "fitted")
     record = material.fit_record(mat)
     assert record["used"] == "analytic" and animated in record["note"] and material.fit_of(mat) is None
+    assert material.driven_inputs(mat) == [animated]  # the rebuilt node keeps the keys
     assert not material.fit_is_stale(mat)
     other = next(s for s in material.shader_node(mat).inputs if s.type == "VALUE" and s.name != animated)
     value = mat.node_tree.nodes.new("ShaderNodeValue")  # a linked input (a texture would do the same)

@@ -1,5 +1,6 @@
 """Switching form or multiple scattering replaces only Lamina's own nodes: the user's textures, mapping nodes and
-shader mixes stay, with their links re-created on the new Lamina node; Lamina's baked texture nodes stay while
+shader mixes stay, with their links re-created on the new Lamina node (and keys and drivers on its inputs moved to
+it); Lamina's baked texture nodes stay while
 they feed it and go when they no longer do; a failed generation changes nothing in the tree."""
 import numpy as np
 import pytest
@@ -248,3 +249,28 @@ def test_a_failed_generation_leaves_the_tree_exactly_as_it_was(form, change, mon
         else:
             material.set_multiple_scattering(mat, False)
     assert _snapshot(mat) == before
+
+
+@pytest.mark.parametrize("first, second", [("nodes", "osl"), ("osl", "nodes")])
+def test_keys_and_drivers_on_the_inputs_move_to_the_new_node(first, second):
+    """Blender deletes a removed node's F-curves: the rebuild points them at the new node's input of the same name
+    first, so an animated roughness and a driven thickness keep animating after a form switch."""
+    mat = material.new_material(model.ID, _params(), first)
+    roughness = _input(mat, "L1 Roughness")
+    for frame, value in ((1, 0.2), (10, 0.7)):
+        roughness.default_value = value
+        roughness.keyframe_insert("default_value", frame=frame)
+    driver = _input(mat, "L1 Thickness").driver_add("default_value").driver
+    driver.expression = "2.5"
+    material.set_form(mat, second)
+    animation = mat.node_tree.animation_data
+    curves = {c.data_path: c for c in list(animation.drivers) + material._fcurves(animation.action)}
+    assert len(curves) == 2
+    for name, kind in (("L1 Roughness", "keys"), ("L1 Thickness", "driver")):
+        target = _input(mat, name)
+        curve = next(c for path, c in curves.items() if mat.node_tree.path_resolve(path.rsplit(".", 1)[0]) == target)
+        assert (curve.driver is not None) == (kind == "driver")
+    keyed = next(c for c in curves.values() if c.driver is None)
+    assert [keyed.evaluate(f) for f in (1, 10)] == pytest.approx([0.2, 0.7])
+    assert material.driven_inputs(mat) == sorted(material.socket_key(material.shader_node(mat), n)
+                                                 for n in ("L1 Roughness", "L1 Thickness"))
