@@ -105,9 +105,7 @@ class Choice:
         return ""
 
     def summary(self) -> str:
-        parts = [f"{m} {100 * e:.1f}%" for m, e in self.error.items()]
-        measured = f" ({', '.join(parts)} rel. RMSE on the comparison scenes)" if parts else ""
-        return f"{self.used} mapping{measured}" + (f"; {self.note}" if self.note else "")
+        return describe({"used": self.used, "error": self.error, "note": self.note})
 
 
 def describe(record: dict) -> str:
