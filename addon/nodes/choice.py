@@ -11,7 +11,6 @@ from __future__ import annotations
 import importlib
 import json
 import os
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -89,13 +88,11 @@ class Choice:
     """The mapping a material renders with: ``used`` ("analytic" or "fitted"), its ``fit`` (None for analytic),
     and the comparison scenes' errors of both (``errors[mapping][scene]``, ``error[mapping]`` their mean over the
     scenes that count, ``means[scene]`` the reference's)."""
-    requested: str
     used: str
     fit: fitted.Fit | None
     errors: dict = field(default_factory=dict)
     error: dict = field(default_factory=dict)
     means: dict = field(default_factory=dict)
-    seconds: float = 0.0
 
     @property
     def note(self) -> str:
@@ -164,16 +161,14 @@ def choose(model_id: str, p, form: str, mapping: str = "auto") -> Choice:
     without a fitted mapping, and "analytic", render analytic without measuring anything. The measurements are
     cached with the fit."""
     if mapping == "analytic" or not fittable(model_id):
-        return Choice(mapping, "analytic", None)
-    start = time.perf_counter()
+        return Choice("analytic", None)
     fits = {f"fitted {d:g}": fit_for(model_id, p, form, d) for d in DAMPINGS}
     errors, means = _measured(model_id, p, form, fits)
     error = {name: counted(e, means) for name, e in errors.items()}
     best = min(fits, key=lambda name: error[name])
     errors, error = ({"analytic": d["analytic"], "fitted": d[best]} for d in (errors, error))
     used = "fitted" if mapping == "fitted" or error["fitted"] < error["analytic"] - AUTO_MARGIN else "analytic"
-    return Choice(mapping, used, fits[best] if used == "fitted" else None, errors, error, means,
-                  time.perf_counter() - start)
+    return Choice(used, fits[best] if used == "fitted" else None, errors, error, means)
 
 
 def _measured(model_id: str, p, form: str, fits: dict) -> tuple[dict, dict]:
