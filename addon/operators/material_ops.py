@@ -15,7 +15,7 @@ from ..models.params import ParamError
 from ..nodes import choice, fittable
 from ..nodes import material as lamina_material
 from . import blend_io
-from .progress import end_modal
+from .progress import begin_modal, end_modal
 
 CUSTOM = "CUSTOM"
 FORM_ITEMS = [("nodes", "Node group", "Native nodes: every device, fastest, most approximate"),
@@ -223,10 +223,7 @@ class LAMINA_OT_set_mapping(bpy.types.Operator):
         self._thread = threading.Thread(target=work, daemon=True)
         self._thread.start()
         self._ticks = 0
-        wm = context.window_manager
-        self._timer = wm.event_timer_add(0.25, window=context.window)
-        wm.progress_begin(0, 100)
-        wm.modal_handler_add(self)
+        self._timer = begin_modal(self, context, 0.25, 100)
         return {"RUNNING_MODAL"}
 
     def modal(self, context, event):

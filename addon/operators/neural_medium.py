@@ -11,6 +11,7 @@ from ..models import neural_medium as model
 from ..models.params import ParamError
 from ..nodes import neural_medium as medium_nodes
 from . import blend_io, medium_bake
+from .progress import begin_modal
 from .material_ops import CUSTOM, assign_to_active_slot, built_or_reported, declared, preset_items
 
 PRESET_ITEMS = preset_items(model.ID, "Set the medium's coefficients below")
@@ -199,10 +200,7 @@ class LAMINA_OT_bake_medium(bpy.types.Operator):
         except (medium_bake.BakeError, ValueError) as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
-        wm = context.window_manager
-        self._timer = wm.event_timer_add(0.05, window=context.window)
-        wm.progress_begin(0, 1000)
-        wm.modal_handler_add(self)
+        self._timer = begin_modal(self, context, 0.05, 1000)
         return {"RUNNING_MODAL"}
 
     def modal(self, context, event):

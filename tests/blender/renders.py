@@ -1,5 +1,10 @@
 """Helpers of the Blender tests that render (imported like tests/unit/stats.py): a Cycles render of a material on a
-comparison scene, its relative error against a prediction, and a material made of one OSL closure."""
+comparison scene, its relative error against a prediction, a material made of one OSL closure, and a saved .blend
+rendered with and without Lamina."""
+import os
+import subprocess
+import sys
+
 import bpy  # noqa: F401  (Blender first: the add-on's Cycles layer imports it)
 
 from addon.nodes import osl
@@ -23,6 +28,42 @@ def relative_error(img, predicted, spec):
     """RMSE over the object over the prediction's mean (floored at 1e-3 for nearly black scenes)."""
     mask = S.scene_mask(spec)
     return metrics.rmse(img, predicted, mask) / max(predicted[mask].mean(), 1e-3)
+
+
+# Renders a scene of a .blend at 32 px, 16 samples, into an EXR; run here and as a fresh process's script.
+SAVED_RENDER = """
+def render(blend, scene_name, out):
+    import bpy
+    bpy.ops.wm.open_mainfile(filepath=blend)
+    scene = bpy.data.scenes[scene_name]
+    scene.render.resolution_x = scene.render.resolution_y = 32
+    scene.cycles.samples = 16
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.filepath = out
+    bpy.ops.render.render(write_still=True, scene=scene.name)
+"""
+FRESH_MAIN = """
+import sys
+render(sys.argv[1], sys.argv[2], sys.argv[3])
+print("LAMINA_MODULES", [m for m in sys.modules if m == "addon" or m.startswith("addon.") or "lamina" in m])
+"""
+
+
+def renders_with_and_without_lamina(blend, scene_name: str, tmp_path):
+    """(here, fresh) RGB images of the .blend's scene: rendered in this process (Lamina loaded) and in a fresh one
+    where Lamina cannot even be imported (asserted)."""
+    from addon.bake.exr import read_exr
+
+    namespace = {}
+    exec(SAVED_RENDER, namespace)
+    here, fresh = tmp_path / "here.exr", tmp_path / "fresh.exr"
+    namespace["render"](str(blend), scene_name, str(here))
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    r = subprocess.run([sys.executable, "-c", SAVED_RENDER + FRESH_MAIN, str(blend), scene_name, str(fresh)],
+                       capture_output=True, text=True, cwd=str(tmp_path), timeout=300, env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "LAMINA_MODULES []" in r.stdout
+    return read_exr(here, "RGB"), read_exr(fresh, "RGB")
 
 
 def closure_material(closure: str):

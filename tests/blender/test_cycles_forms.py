@@ -1,9 +1,6 @@
 """Cycles renders what the mapping predicts (both forms, every preset), matches the reference where the mapping
 is exact, stays finite at the extremes, and a saved .blend renders the same without Lamina."""
 import os
-import subprocess
-import sys
-import textwrap
 
 import numpy as np
 import pytest
@@ -18,6 +15,8 @@ from addon.operators.cycles_render import render_cycles  # noqa: E402
 from addon.reference import metrics  # noqa: E402
 from addon.reference import scenes as S  # noqa: E402
 from addon.reference import spongecake as reference  # noqa: E402
+
+from renders import renders_with_and_without_lamina  # noqa: E402
 
 pytestmark = pytest.mark.blender
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -157,34 +156,6 @@ def test_saved_blend_renders_the_same_without_lamina(form, model_id, name, tmp_p
     blend = tmp_path / "m.blend"
     p = MODELS[model_id].params_from_dict(presets.load(model_id, name))
     blend_io.write_material_blend(model_id, p, form, name, str(blend))
-    render = textwrap.dedent(f"""
-        def render(blend, out):
-            import bpy
-            bpy.ops.wm.open_mainfile(filepath=blend)
-            scene = bpy.data.scenes["Lamina {name}"]
-            scene.render.resolution_x = scene.render.resolution_y = 32
-            scene.cycles.samples = 16
-            scene.render.image_settings.file_format = "OPEN_EXR"
-            scene.render.filepath = out
-            bpy.ops.render.render(write_still=True, scene=scene.name)
-    """)
-    namespace = {}
-    exec(render, namespace)
-    here = tmp_path / "here.exr"
-    namespace["render"](str(blend), str(here))
-    render += textwrap.dedent("""
-        import sys
-        render(sys.argv[1], sys.argv[2])
-        print("LAMINA_MODULES", [m for m in sys.modules if m == "addon" or m.startswith("addon.") or "lamina" in m])
-    """)
-    fresh = tmp_path / "fresh.exr"
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    r = subprocess.run([sys.executable, "-c", render, str(blend), str(fresh)], capture_output=True, text=True,
-                       cwd=str(tmp_path), timeout=300, env=env)
-    assert r.returncode == 0, r.stderr[-2000:]
-    assert "LAMINA_MODULES []" in r.stdout
-    from addon.bake.exr import read_exr
-
-    a, b = read_exr(here, "RGB"), read_exr(fresh, "RGB")
+    a, b = renders_with_and_without_lamina(blend, f"Lamina {name}", tmp_path)
     assert a.mean() > 1e-3
     np.testing.assert_array_equal(a, b)

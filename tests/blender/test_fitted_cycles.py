@@ -1,10 +1,6 @@
 """The fitted mapping in Cycles (issue 14): both forms render the fitted prediction (its view tables as a Color Ramp
 or an OSL array), a saved file renders without Lamina, and the material keeps its choice and says when it is
 stale."""
-import os
-import subprocess
-import sys
-import textwrap
 
 import numpy as np
 import pytest
@@ -17,7 +13,7 @@ from addon.nodes import material, predicted_image  # noqa: E402
 from addon.operators import blend_io  # noqa: E402
 from addon.reference import scenes as S  # noqa: E402
 
-from renders import relative_error, render  # noqa: E402
+from renders import relative_error, render, renders_with_and_without_lamina  # noqa: E402
 from ui_helpers import panel_text  # noqa: E402
 
 pytestmark = pytest.mark.blender
@@ -75,36 +71,8 @@ def test_a_saved_fitted_file_renders_the_same_without_lamina(tmp_path):
     model_id, name = CASES[0]
     blend = tmp_path / "m.blend"
     blend_io.write_material_blend(model_id, _params(model_id, name), "nodes", name, str(blend), mapping="fitted")
-    script = textwrap.dedent(f"""
-        def render(blend, out):
-            import bpy
-            bpy.ops.wm.open_mainfile(filepath=blend)
-            scene = bpy.data.scenes["Lamina {name}"]
-            scene.render.resolution_x = scene.render.resolution_y = 32
-            scene.cycles.samples = 16
-            scene.render.image_settings.file_format = "OPEN_EXR"
-            scene.render.filepath = out
-            bpy.ops.render.render(write_still=True, scene=scene.name)
-    """)
-    namespace = {}
-    exec(script, namespace)
-    here = tmp_path / "here.exr"
-    namespace["render"](str(blend), str(here))
+    a, b = renders_with_and_without_lamina(blend, f"Lamina {name}", tmp_path)
     assert any("fitted" in g.name for g in bpy.data.node_groups)
-    script += textwrap.dedent("""
-        import sys
-        render(sys.argv[1], sys.argv[2])
-        print("LAMINA_MODULES", [m for m in sys.modules if m == "addon" or m.startswith("addon.") or "lamina" in m])
-    """)
-    fresh = tmp_path / "fresh.exr"
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    r = subprocess.run([sys.executable, "-c", script, str(blend), str(fresh)], capture_output=True, text=True,
-                       cwd=str(tmp_path), timeout=300, env=env)
-    assert r.returncode == 0, r.stderr[-2000:]
-    assert "LAMINA_MODULES []" in r.stdout
-    from addon.bake.exr import read_exr
-
-    a, b = read_exr(here, "RGB"), read_exr(fresh, "RGB")
     assert a.mean() > 1e-3
     np.testing.assert_array_equal(a, b)
 
