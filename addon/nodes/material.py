@@ -264,29 +264,29 @@ def driven_inputs(mat) -> list[str]:
     if node is None:
         return []
     names = {s.name for s in node.inputs if s.is_linked and s.name not in (BULK_INPUT, TANGENT_INPUT)}
-    animation = mat.node_tree.animation_data
-    prefix = f'nodes["{node.name}"].inputs['
-    curves = [] if animation is None else list(animation.drivers) + _fcurves(animation.action)
-    for curve in curves:
-        if curve.data_path.startswith(prefix):
-            index = curve.data_path[len(prefix):].split("]")[0]
-            names.add(node.inputs[int(index)].name if index.isdigit() else index.strip('"'))
+    names |= {name for _, name, _ in _input_curves(mat.node_tree, node)}
     return sorted(names)
+
+
+def _input_curves(tree, node) -> list[tuple]:
+    """(F-curve or driver, input name, the rest of its data path) of each animated input of ``node``."""
+    animation = tree.animation_data
+    if animation is None:
+        return []
+    prefix = f'nodes["{node.name}"].inputs['
+    out = []
+    for curve in list(animation.drivers) + _fcurves(animation.action):
+        if curve.data_path.startswith(prefix):
+            index, _, rest = curve.data_path[len(prefix):].partition("]")
+            out.append((curve, node.inputs[int(index)].name if index.isdigit() else index.strip('"'), rest))
+    return out
 
 
 def _move_animation(tree, old, node) -> None:
     """Point the F-curves and drivers of ``old``'s inputs at ``node``'s inputs of the same name (``node`` still has its
     own name; renaming it later carries them along), so that removing ``old`` does not delete the user's keys."""
-    animation = tree.animation_data
-    if animation is None:
-        return
-    prefix = f'nodes["{old.name}"].inputs['
     by_name = {_norm(socket.name): j for j, socket in enumerate(node.inputs)}
-    for curve in list(animation.drivers) + _fcurves(animation.action):
-        if not curve.data_path.startswith(prefix):
-            continue
-        index, _, rest = curve.data_path[len(prefix):].partition("]")
-        name = old.inputs[int(index)].name if index.isdigit() else index.strip('"')
+    for curve, name, rest in _input_curves(tree, old):
         if _norm(name) in by_name:
             curve.data_path = f'nodes["{node.name}"].inputs[{by_name[_norm(name)]}]{rest}'
 
