@@ -26,8 +26,7 @@ BACKLIT_MIN_MEAN = 1e-3  # a scene whose reference mean is below this is not cou
 REFERENCE_ALBEDO_SAMPLES = 4096  # the reference's directional albedo per fitted view
 SCENE_ALBEDO_SAMPLES = 1024  # per furnace pixel in the choice's scenes
 # The residual weightings fitted (``fitted.fit``'s damping): relative errors, and halfway to absolute ones. Neither
-# is best for every material (measured on the presets: thin coats over smooth bases prefer 0.5, a leaf or a rough
-# bottom 1), so both are fitted and the Fitted mapping is the one closer on the comparison scenes.
+# is best for every material, so both are fitted and the Fitted mapping is the one closer on the comparison scenes.
 DAMPINGS = (1.0, 0.5)
 _fits: dict[str, fitted.Fit] = {}
 

@@ -58,8 +58,8 @@ def table_coordinate(b):
 def extra_dictionary() -> list[tuple[str, dict]]:
     """(kind, parameters) of the closures the fit may add, each with a white colour: those whose Cycles rendering
     ``closures_np`` predicts under suns and in the furnace (tests/blender). Refraction around the normal is not among
-    them: under a uniform sky Cycles renders up to 46% less at grazing views than its evaluation integrates to
-    (measured, α = 1, IOR 1.5), so its prediction would be off there."""
+    them: under a uniform sky Cycles renders it darker at grazing views than its evaluation integrates to (seen in
+    a one-off render, α = 1, IOR 1.5; not yet a test), so its prediction would be off there."""
     up = (0.0, 0.0, 1.0)
     out = [("diffuse", {}), ("translucent", {})]
     out += [("ggx", {"alpha": a, "normal": up}) for a in (0.15, 0.3, 0.6, 1.0)]
