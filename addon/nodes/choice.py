@@ -5,6 +5,10 @@ weighting of ``DAMPINGS``), cached by content (parameters, form, fitter version)
 measures the analytic mapping and each fit on the comparison scenes at ``CHOICE_RESOLUTION`` (the scenes and
 resolution ``make bench`` reports; a smaller furnace): the Fitted mapping is the closer fit, and Auto keeps the
 analytic one unless the fitted one is lower by ``AUTO_MARGIN``.
+
+A texture-driven input (``driven``: ``fitted.Driven``, ``driven_over``) is tabulated at ``DRIVEN_VALUES`` values
+across the texture's range (``fitted.fit_driven``). The choice is measured at the middle value, with the fits of that
+value; the winning residual weighting is then fitted at every value.
 """
 from __future__ import annotations
 
@@ -28,6 +32,7 @@ SCENE_ALBEDO_SAMPLES = 1024  # per furnace pixel in the choice's scenes
 # The residual weightings fitted (``fitted.fit``'s damping): relative errors, and halfway to absolute ones. Neither
 # is best for every material, so both are fitted and the Fitted mapping is the one closer on the comparison scenes.
 DAMPINGS = (1.0, 0.5)
+DRIVEN_VALUES = 5  # tabulated values of a texture-driven input (odd: the middle one is where the choice is measured)
 _fits: dict[str, fitted.Fit] = {}
 
 
@@ -35,22 +40,45 @@ def cache_folder() -> Path:
     return Path(os.environ.get("LAMINA_CACHE", Path.home() / ".cache" / "lamina")) / "fits"
 
 
-def fit_key(model_id: str, p, form: str) -> str:
-    """What a fit depends on: the parameters, the form, whether node groups have the Metallic BSDF, the fitter."""
+def fit_key(model_id: str, p, form: str, driven: fitted.Driven | None = None) -> str:
+    """What a fit depends on: the parameters, the form, whether node groups have the Metallic BSDF, the fitter, and
+    a driven input's tabulated values (the input's own constant does not count then)."""
     from .expr import NumpyBackend
 
-    text = json.dumps([FITTER_VERSION, model_id, p.to_dict(), form, NumpyBackend.metallic_node], sort_keys=True)
+    if driven is not None:
+        p = at(model_id, p, driven, len(driven.values) // 2)
+    text = json.dumps([FITTER_VERSION, model_id, p.to_dict(), form, NumpyBackend.metallic_node,
+                       driven and driven.to_json()], sort_keys=True)
     return __import__("hashlib").sha256(text.encode()).hexdigest()[:24]
+
+
+def driven_over(model_id: str, p, socket: str, lo: float, hi: float) -> fitted.Driven:
+    """The driven input ``socket`` of ``p`` tabulated at ``DRIVEN_VALUES`` values from ``lo`` to ``hi`` (one value
+    when they are equal), clamped to the parameter's range."""
+    s = next(s for s in MAPPINGS[model_id].sockets(p) if s.name == socket)
+    if s.kind not in ("float", "color"):
+        raise ValueError(f"{socket}: a {s.kind} input cannot be tabulated (only float and colour inputs)")
+    lo, hi = (float(np.clip(v, s.param.min, s.param.max)) for v in (lo, hi))
+    count = DRIVEN_VALUES if hi > lo else 1
+    return fitted.Driven(socket, s.kind, tuple(float(v) for v in np.linspace(lo, hi, count)))
+
+
+def at(model_id: str, p, driven: fitted.Driven, j: int):
+    """``p`` with the driven input at its j-th tabulated value."""
+    mapping = MAPPINGS[model_id]
+    return mapping.with_values(p, {**mapping.input_values(p), driven.socket: driven.value(j)})
 
 
 def reference_of(model_id: str):
     return importlib.import_module(f"..reference.{model_id}", __package__)
 
 
-def fit_for(model_id: str, p, form: str, damping: float = DAMPINGS[0]) -> fitted.Fit:
-    """The fit of ``p`` in ``form`` with the residual weighting ``damping`` (``fitted.fit``), cached in memory and in
-    ``cache_folder`` (an unreadable cache file is refitted and replaced)."""
-    key = f"{fit_key(model_id, p, form)}-{damping:g}"
+def fit_for(model_id: str, p, form: str, damping: float = DAMPINGS[0], driven: fitted.Driven | None = None,
+            progress=None) -> fitted.Fit:
+    """The fit of ``p`` in ``form`` with the residual weighting ``damping`` (``fitted.fit``; ``fitted.fit_driven``
+    over a ``driven`` input, reporting ``progress(fraction)``), cached in memory and in ``cache_folder`` (an
+    unreadable cache file is refitted and replaced)."""
+    key = f"{fit_key(model_id, p, form, driven)}-{damping:g}"
     if key in _fits:
         return _fits[key]
     path = cache_folder() / f"{key}.npz"
@@ -63,8 +91,16 @@ def fit_for(model_id: str, p, form: str, damping: float = DAMPINGS[0]) -> fitted
     from . import _backend
 
     ref = reference_of(model_id)
-    result = fitted.fit(lambda wo: _backend(model_id, p, form, wo), lambda wi, wo: ref.eval(p, wi, wo),
-                        lambda wo: ref.furnace_albedo(p, wo, n=REFERENCE_ALBEDO_SAMPLES), form, damping)
+
+    def problem(q):
+        return (lambda wo: _backend(model_id, q, form, wo), lambda wi, wo: ref.eval(q, wi, wo),
+                lambda wo: ref.furnace_albedo(q, wo, n=REFERENCE_ALBEDO_SAMPLES))
+
+    if driven is None:
+        result = fitted.fit(*problem(p), form, damping)
+    else:
+        problems = [problem(at(model_id, p, driven, j)) for j in range(len(driven.values))]
+        result = fitted.fit_driven(problems, driven, form, damping, progress)
     _cache_write(path, lambda f: np.savez(f, **result.to_arrays()))
     _fits[key] = result
     return result
@@ -86,12 +122,13 @@ def _cache_write(path: Path, write) -> None:
 class Choice:
     """The mapping a material renders with: ``used`` ("analytic" or "fitted"), its ``fit`` (None for analytic),
     and the comparison scenes' errors of both (``errors[mapping][scene]``, ``error[mapping]`` their mean over the
-    scenes that count, ``means[scene]`` the reference's)."""
+    scenes that count, ``means[scene]`` the reference's); ``damping``: the residual weighting of the closer fit."""
     used: str
     fit: fitted.Fit | None
     errors: dict = field(default_factory=dict)
     error: dict = field(default_factory=dict)
     means: dict = field(default_factory=dict)
+    damping: float | None = None
 
     @property
     def note(self) -> str:
@@ -155,19 +192,26 @@ def counted(errors: dict, means: dict) -> float:
     return float(np.mean(values)) if values else 0.0
 
 
-def choose(model_id: str, p, form: str, mapping: str = "auto") -> Choice:
+def choose(model_id: str, p, form: str, mapping: str = "auto", driven: fitted.Driven | None = None,
+           progress=None) -> Choice:
     """The mapping ``p`` renders with in ``form`` for the user's choice ``mapping`` (``MAPPING_KINDS``); models
     without a fitted mapping, and "analytic", render analytic without measuring anything. The measurements are
-    cached with the fit."""
+    cached with the fit. With a ``driven`` input, the choice is made at its middle value (module docstring)."""
     if mapping == "analytic" or not fittable(model_id):
         return Choice("analytic", None)
-    fits = {f"fitted {d:g}": fit_for(model_id, p, form, d) for d in DAMPINGS}
-    errors, means = _measured(model_id, p, form, fits)
+    if driven is not None:
+        made = choose(model_id, at(model_id, p, driven, len(driven.values) // 2), form, mapping)
+        if made.used == "fitted":
+            made.fit = fit_for(model_id, p, form, made.damping, driven, progress)
+        return made
+    fits = {d: fit_for(model_id, p, form, d) for d in DAMPINGS}
+    labels = {d: f"fitted {d:g}" for d in DAMPINGS}
+    errors, means = _measured(model_id, p, form, {labels[d]: f for d, f in fits.items()})
     error = {name: counted(e, means) for name, e in errors.items()}
-    best = min(fits, key=lambda name: error[name])
-    errors, error = ({"analytic": d["analytic"], "fitted": d[best]} for d in (errors, error))
+    best = min(fits, key=lambda d: error[labels[d]])
+    errors, error = ({"analytic": e["analytic"], "fitted": e[labels[best]]} for e in (errors, error))
     used = "fitted" if mapping == "fitted" or error["fitted"] < error["analytic"] - AUTO_MARGIN else "analytic"
-    return Choice(used, fits[best] if used == "fitted" else None, errors, error, means)
+    return Choice(used, fits[best] if used == "fitted" else None, errors, error, means, best)
 
 
 def _measured(model_id: str, p, form: str, fits: dict) -> tuple[dict, dict]:

@@ -30,6 +30,8 @@ MIN_TANGENT = 1e-6
 # Largest grey weight a node group gives a closure without a colour input (Mix Shaders, whose factor Cycles clamps to
 # [0, 1], one per unit: ``NodeBackend._scaled``); mappings cap such weights at it so that both forms agree.
 MAX_MIX_WEIGHT = 4
+# The largest grey weight of the node group's conductor (two Mix Shaders: ``NodeBackend.conductor``).
+MAX_CONDUCTOR_WEIGHT = 2
 # The smallest α_x / α_y of the node group's anisotropic Metallic BSDF (aspect² = 1 − 0.9 · anisotropy ≥ 0.1).
 METAL_MIN_RATIO = 0.1
 # The Shader input that carries the material a model wraps (micrograin's bulk).
@@ -149,7 +151,15 @@ class NumpyBackend(NumpyMath):
     def transparent(self, color):
         self._add("transparent", color)
 
+    def _grey(self, color, cap: float):
+        """What a node group renders of a closure it weighs in grey through Mix Shaders: the channels' mean, capped."""
+        grey = np.minimum(np.mean(np.broadcast_to(color, (self.n, 3)), axis=1), cap)
+        return np.repeat(grey[:, None], 3, axis=1)
+
     def conductor(self, color, alpha, eta, k):
+        """The physical conductor; node groups weigh it in grey (``NodeBackend.conductor``)."""
+        if self.form == "nodes":
+            color = self._grey(color, MAX_CONDUCTOR_WEIGHT)
         self._add("conductor", color, alpha=alpha, eta=eta, k=k)
 
     def dielectric(self, color, alpha, ior):
@@ -158,8 +168,9 @@ class NumpyBackend(NumpyMath):
     def beckmann(self, color, alpha, eta=None):
         """Beckmann reflection around the shading normal; with ``eta`` the dielectric Fresnel per microfacet (Blender
         4.2's node group: its mean over the lobe, ``lobe_fresnel``)."""
-        if eta is not None and self.form == "nodes" and not self.metallic_node:
-            color, eta = lobe_fresnel(self, color, eta, alpha), None
+        if eta is not None and self.form == "nodes":
+            color, eta = (self._grey(color, MAX_MIX_WEIGHT), eta) if self.metallic_node else (
+                lobe_fresnel(self, color, eta, alpha), None)
         self._add("beckmann", color, alpha=alpha, eta=eta)
 
     def beckmann_refraction(self, color, alpha, ior, normal):

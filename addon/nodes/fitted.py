@@ -10,6 +10,11 @@ table. Per tabulated view cosine the weights minimise the cosine-weighted error 
 forward model is ``closures_np``: the fit optimises what Cycles renders. Tables are piecewise linear in √cos θo on
 ``KNOTS`` uniform knots (``view_cosines``; a Color Ramp in node groups, a constant array in OSL: both exact).
 
+A texture-driven input (``Driven``) adds an axis: the material is fitted at ``Driven.values`` (a few values across
+the texture's range) with one set of closures, and the shader interpolates the tables linearly between them at the
+input's value per shading point (per channel for a colour input: channel c of the tables follows channel c of the
+input, exact where the material's channels are independent).
+
 Quadrature over ωi: a Fibonacci sphere plus samples of each narrow closure's own microfacet distribution, combined
 by the balance heuristic (multiple importance sampling), at ``AZIMUTHS`` view azimuths per knot: deterministic.
 """
@@ -211,16 +216,47 @@ def nnls_gram(gram: np.ndarray, rhs: np.ndarray, tol: float = 1e-12) -> np.ndarr
 # ------------------------------------------------------------------------------ the fit
 
 @dataclass(frozen=True)
+class Driven:
+    """A shader input fed by a texture: the fit's tables are tabulated at ``values`` (uniform, ascending) of it."""
+    socket: str  # the shader input, e.g. "L2 Albedo"
+    kind: str  # "float" or "color" (a colour input is tabulated at greys)
+    values: tuple  # the input's values the tables hold, uniform from the texture's least to its greatest
+
+    def to_json(self) -> list:
+        return [self.socket, self.kind, list(self.values)]
+
+    @classmethod
+    def from_json(cls, data) -> "Driven":
+        socket, kind, values = data
+        return cls(socket, kind, tuple(float(v) for v in values))
+
+    def value(self, j: int):
+        """What the input holds at the j-th tabulated value (a grey for a colour input)."""
+        return self.values[j] if self.kind == "float" else (self.values[j],) * 3
+
+    def weights(self, b) -> list:
+        """Per tabulated value, the linear interpolation weight of the input's value on backend ``b`` (a colour of
+        weights for a colour input); values outside the range take the nearest end's tables."""
+        lo, hi, last = self.values[0], self.values[-1], len(self.values) - 1
+        if last == 0:
+            return [1.0]
+        x = b.minimum(b.maximum((b.input(self.socket, self.kind) - lo) * (last / (hi - lo)), 0.0), float(last))
+        return [b.maximum(b.minimum(x - (j - 1), (j + 1) - x), 0.0) for j in range(last + 1)]
+
+
+@dataclass(frozen=True)
 class Fit:
     """A material's fitted mapping: ``scales`` (J, KNOTS, 3) of its analytic closures (in recording order, the
     ``FIXED`` ones skipped), ``extras`` (kind, parameters) with their weights (E, KNOTS, 3), and the relative RMSE
-    of both mappings in the fit's own quadrature."""
+    of both mappings in the fit's own quadrature. With ``driven``, the tables have an axis of its values:
+    (J, G, KNOTS, 3) and (E, G, KNOTS, 3), and the errors are the means over them."""
     scales: np.ndarray
     extras: tuple
     extra_weights: np.ndarray
     error_analytic: float
     error_fitted: float
     groups: tuple = ()  # the atom of each rescaled closure, in recording order (``atom_groups``)
+    driven: Driven | None = None
 
     def to_json(self) -> dict:
         """Lists (a material keeps its fit: what it renders can be predicted anywhere); ``from_arrays`` reads
@@ -232,19 +268,22 @@ class Fit:
         """Plain arrays (``np.savez``); ``from_arrays`` reads them back."""
         return {"scales": self.scales, "extra_weights": self.extra_weights,
                 "extras": np.array(json.dumps(self.extras)), "groups": np.array(self.groups, dtype=int),
-                "errors": np.array([self.error_analytic, self.error_fitted])}
+                "errors": np.array([self.error_analytic, self.error_fitted]),
+                "driven": np.array(json.dumps(self.driven and self.driven.to_json()))}
 
     @classmethod
     def from_arrays(cls, a) -> "Fit":
         extras = tuple((kind, {k: tuple(v) if isinstance(v, list) else v for k, v in kw.items()})
                        for kind, kw in json.loads(str(a["extras"])))
+        driven = json.loads(str(a["driven"])) if "driven" in a else None
         return cls(np.asarray(a["scales"]), extras, np.asarray(a["extra_weights"]), *map(float, a["errors"]),
-                   tuple(int(g) for g in a["groups"]))
+                   tuple(int(g) for g in a["groups"]), driven and Driven.from_json(driven))
 
     def digest(self) -> str:
         """A short content hash (names the shader that carries the tables)."""
         h = hashlib.md5(np.round(self.scales, 6).tobytes() + np.round(self.extra_weights, 6).tobytes())
-        h.update(json.dumps([self.extras, self.groups], sort_keys=True).encode())
+        driven = self.driven and self.driven.to_json()
+        h.update(json.dumps([self.extras, self.groups, driven], sort_keys=True).encode())
         return h.hexdigest()[:8]
 
 
@@ -378,26 +417,30 @@ def _grey(kind: str, kw: dict, form: str) -> bool:
     return form == "nodes" and (kind == "conductor" or (kind == "beckmann" and kw.get("eta") is not None))
 
 
-def fit(backend_of, ref_eval, ref_albedo, form: str, damping: float = 1.0) -> Fit:
+def fit(backend_of, ref_eval, ref_albedo, form: str, damping: float = 1.0, groups=None, extras=None) -> Fit:
     """Fit the mapping whose view-only closures ``backend_of(wo)`` records (a ``NumpyBackend`` after ``shade``)
     against the reference ``ref_eval(wi, wo)`` (N, 3) and directional albedo ``ref_albedo(wo)`` (N, 3): up to
     ``MAX_EXTRAS`` extra closures chosen greedily, each kept only if it lowers the error by ``EXTRA_GAIN``. The
     residual at each direction is divided by (the reference's mean level + its value)^``damping``: 1 weighs
-    relative errors (a peak counts no more than the dim rest), 0 absolute ones."""
+    relative errors (a peak counts no more than the dim rest), 0 absolute ones. Given ``groups`` (the atoms) and
+    ``extras`` (the extra closures, all used), the fit keeps that structure (``fit_driven``)."""
     closures = _fitted_closures(backend_of(np.array([[0.0, 0.0, 1.0]])).closures)
-    groups = atom_groups(backend_of)
+    groups = atom_groups(backend_of) if groups is None else tuple(groups)
     present = {kind for kind, _, _ in closures}
-    extras = [(kind, kw) for kind, kw in extra_dictionary() if not (kind in SHAPELESS and kind in present)]
+    fixed = extras is not None
+    if not fixed:
+        extras = [(kind, kw) for kind, kw in extra_dictionary() if not (kind in SHAPELESS and kind in present)]
     n_analytic = 1 + max(groups, default=-1)
     grey = np.zeros(n_analytic + len(extras), dtype=bool)
     for g, (kind, _, kw) in zip(groups, closures):
         grey[g] = _grey(kind, kw, form)
     systems = [_knot_systems(backend_of, ref_eval, ref_albedo, mu, groups, extras, damping) for mu in view_cosines()]
-    use = np.arange(n_analytic + len(extras)) < n_analytic
-    error_analytic = _error(systems, [np.tile(use.astype(float), (3, 1))] * len(systems))
+    use = np.arange(n_analytic + len(extras)) < (n_analytic + len(extras) if fixed else n_analytic)
+    error_analytic = _error(systems, [np.tile((np.arange(len(use)) < n_analytic).astype(float), (3, 1))]
+                            * len(systems))
     best = _solve_all(systems, use, grey, n_analytic)
     error = _error(systems, best)
-    for _ in range(MAX_EXTRAS):
+    for _ in range(0 if fixed else MAX_EXTRAS):
         trials = []
         for e in np.flatnonzero(~use):
             trial = use.copy()
@@ -414,6 +457,34 @@ def fit(backend_of, ref_eval, ref_albedo, form: str, damping: float = 1.0) -> Fi
                groups)
 
 
+def common_groups(backends_of) -> tuple[int, ...]:
+    """The atoms of closures that are alike at every tabulated value (``atom_groups`` of each): closures merged at
+    one value but not at another stay apart."""
+    per_value = [atom_groups(b) for b in backends_of]
+    if len({len(g) for g in per_value}) > 1:
+        raise ValueError("the material's closures change with the driven input: it cannot be tabulated over it")
+    labels: dict = {}
+    return tuple(labels.setdefault(key, len(labels)) for key in zip(*per_value))
+
+
+def fit_driven(problems, driven: Driven, form: str, damping: float = 1.0, progress=None) -> Fit:
+    """The fit of a texture-driven material: ``problems[j]`` = (backend_of, ref_eval, ref_albedo) with the input at
+    ``driven.values[j]``. The middle value chooses the extra closures; every value is fitted with them and the
+    ``common_groups``. ``progress(fraction)`` after each value."""
+    groups = common_groups([backend_of for backend_of, _, _ in problems])
+    middle = len(problems) // 2
+    order = [middle] + [j for j in range(len(problems)) if j != middle]
+    fits = {}
+    for done, j in enumerate(order):
+        fits[j] = fit(*problems[j], form, damping, groups, None if j == middle else list(fits[middle].extras))
+        if progress is not None:
+            progress((done + 1) / len(order))
+    ordered = [fits[j] for j in range(len(problems))]
+    return Fit(np.stack([f.scales for f in ordered], axis=1), ordered[middle].extras,
+               np.stack([f.extra_weights for f in ordered], axis=1), float(np.mean([f.error_analytic for f in ordered])),
+               float(np.mean([f.error_fitted for f in ordered])), groups, driven)
+
+
 # ------------------------------------------------------------------------------ shading
 
 CLOSURES = ("glossy", "diffuse", "translucent", "conductor", "dielectric", "beckmann", "beckmann_refraction")
@@ -423,10 +494,10 @@ class ScaledBackend:
     """A backend that passes everything to ``b`` but gathers the closures by atom (``Fit.groups``): one closure
     per atom, its members' colours summed, times the atom's fitted table; ``flush`` emits them."""
 
-    def __init__(self, b, fit: Fit, coordinate):
+    def __init__(self, b, fit: Fit, table):
         self._b = b
         self._fit = fit
-        self.coordinate = coordinate  # ``table_coordinate``
+        self.table = table  # ``tables``
         self._next = 0
         self._atoms: dict[int, list] = {}  # atom -> [method, summed colour, args, kw]
 
@@ -449,18 +520,38 @@ class ScaledBackend:
         """Emit one closure per atom; an atom the fit set to zero at every view is left out."""
         for g, (method, color, args, kw) in self._atoms.items():
             if self._fit.scales[g].max() > 0.0:
-                method(color * self._b.ramp(self._fit.scales[g], self.coordinate), *args, **kw)
+                method(color * self.table(self._fit.scales[g]), *args, **kw)
+
+
+def tables(b, fit: Fit):
+    """A function of one closure's table (K, 3), or (G, K, 3) when ``fit.driven``, returning its colour on backend
+    ``b``: a ramp over ``table_coordinate``, and for a driven fit the ramps of the tabulated values weighed by
+    ``Driven.weights`` (one ramp per tabulated value where the table is not zero)."""
+    u = table_coordinate(b)
+    if fit.driven is None:
+        return lambda values: b.ramp(values, u)
+    weights = fit.driven.weights(b)
+
+    def interpolated(values):
+        total = None  # the caller skips tables that are zero at every value
+        for v, w in zip(values, weights):
+            if v.max() > 0.0:
+                term = b.scale(b.ramp(v, u), w) if fit.driven.kind == "float" else b.ramp(v, u) * w
+                total = term if total is None else total + term
+        return total
+
+    return interpolated
 
 
 def shade(b, mapping, p, fit: Fit) -> None:
     """The fitted mapping of ``p`` on backend ``b`` (module docstring)."""
-    scaled = ScaledBackend(b, fit, table_coordinate(b))
+    scaled = ScaledBackend(b, fit, tables(b, fit))
     mapping.shade(scaled, p)
     scaled.flush()
     for (kind, kw), weights in zip(fit.extras, fit.extra_weights):
         if weights.max() <= 0.0:
             continue
-        color = b.ramp(weights, scaled.coordinate)
+        color = scaled.table(weights)
         if kind == "ggx":
             b.glossy(color, kw["alpha"], kw["alpha"], b.normal())
         elif kind == "beckmann_refraction":

@@ -7,7 +7,9 @@ With multiple scattering, the network's prediction is baked into the node's ``MS
 ``lamina_ms_key`` property records which parameters (and networks) it was baked for. Switching form, mapping or
 multiple scattering replaces only Lamina's own nodes; the user's nodes and links around them stay, and keys and
 drivers on the Lamina node's inputs move to the new node (``_replace``). The mapping (analytic, fitted, Auto;
-``choice``) is chosen at each rebuild and recorded in ``lamina_fit`` with the fit it renders.
+``choice``) is chosen at each rebuild and recorded in ``lamina_fit`` with the fit it renders; an input fed by an
+Image Texture is tabulated over the texture's range (``plan``), other linked or animated inputs fall back to the
+analytic mapping with a note.
 """
 from __future__ import annotations
 
@@ -15,13 +17,15 @@ import hashlib
 import importlib
 import json
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import bpy
+import numpy as np
 
+from ..bake.textures import BakeError
 from ..models import MODELS
 from ..models.micrograin import WRAPPED, Bulk
-from . import FORMS, MAPPING_KINDS, MAPPINGS, choice, fittable, fitted, osl, shade
+from . import FORMS, MAPPING_KINDS, MAPPINGS, choice, fittable, fitted, image_values, osl, shade
 from .expr import BULK_INPUT, TANGENT_INPUT, NumpyBackend, OslBackend
 from .node_backend import NodeBackend
 
@@ -247,25 +251,101 @@ def fit_of(mat):
 
 def fit_is_stale(mat) -> bool:
     """Whether the values changed since the mapping was fitted and chosen (a fitted table belongs to the values it
-    was fitted for), or inputs of a fitted material became linked or animated (``driven_inputs``)."""
+    was fitted for), inputs of a fitted material became linked or animated (``driven_inputs``), or the texture a
+    driven fit follows was swapped, resized or unlinked (its pixels are not compared: edit, then Refit)."""
     record = fit_record(mat)
     if record is None or shader_node(mat) is None:
         return False
-    if record["used"] == "fitted" and driven_inputs(mat):
-        return True
     model_id, p = current_params(mat)
-    return record["key"] != choice.fit_key(model_id, p, form_of(mat))
+    driven = fitted.Driven.from_json(record["driven"]) if "driven" in record else None
+    if driven is not None:
+        if _fit_inputs(mat, model_id, p) != [driven.socket] or _driving_image(mat, driven.socket) != record["image"]:
+            return True
+    elif record["used"] == "fitted" and driven_inputs(mat):
+        return True
+    return record["key"] != choice.fit_key(model_id, p, form_of(mat), driven)
 
 
 def driven_inputs(mat) -> list[str]:
     """The Lamina node's inputs whose value is not the socket's constant: linked (a texture, other nodes) or
-    animated / driven. A fit holds for constant values only."""
+    animated / driven. A fit holds for constant values only, or follows one texture (``plan``)."""
     node = shader_node(mat)
     if node is None:
         return []
     names = {s.name for s in node.inputs if s.is_linked and s.name not in (BULK_INPUT, TANGENT_INPUT)}
     names |= {name for _, name, _ in _input_curves(mat.node_tree, node)}
     return sorted(names)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What a rebuild asks ``choice.choose`` for: the ``mapping``, the texture-``driven`` input it tabulates and the
+    ``image`` feeding it (name, file path, size: staleness), or, where inputs are driven in a way no fit follows,
+    the analytic mapping and a ``note`` saying why."""
+    mapping: str
+    driven: fitted.Driven | None = None
+    image: list | None = None
+    note: str = ""
+
+
+def plan(mat, model_id: str, p, mapping: str) -> Plan:
+    """The ``Plan`` for giving ``mat`` (its current parameters ``p``) the ``mapping``: one float or colour input fed
+    by an Image Texture (its range read from the pixels, as Cycles sees them) is tabulated; anything else that is
+    linked or animated renders analytic, with a note."""
+    if mapping == "analytic" or not fittable(model_id) or not driven_inputs(mat):
+        return Plan(mapping)
+    try:
+        driven, image = _texture_input(mat, model_id, p)
+    except BakeError as e:
+        return Plan("analytic", note=f"{e}; the analytic mapping renders")
+    middle = driven.values[len(driven.values) // 2]
+    note = (f"{driven.socket} follows its texture: fitted at {len(driven.values)} values from {driven.values[0]:.3g} "
+            f"to {driven.values[-1]:.3g}; errors measured at {middle:.3g}")
+    return Plan(mapping, driven, image, note)
+
+
+def _fit_inputs(mat, model_id: str, p) -> list[str]:
+    """``driven_inputs`` less the ``MS`` inputs that baked maps feed (they follow the textures of the layers)."""
+    baked = {_norm(s.name) for s in MAPPINGS[model_id].sockets(p) if s.baked}
+    return [_name(model_id, p, n) for n in driven_inputs(mat) if _norm(n) not in baked]
+
+
+def _name(model_id: str, p, key: str) -> str:
+    """A shader input's name from its socket name (a script node's is an identifier)."""
+    return next((s.name for s in MAPPINGS[model_id].sockets(p) if _norm(s.name) == _norm(key)), key)
+
+
+def _texture_input(mat, model_id: str, p):
+    """(``fitted.Driven``, the image's identity) of the one input a fit can follow; BakeError saying why not."""
+    node = shader_node(mat)
+    animated = sorted({_name(model_id, p, name) for _, name, _ in _input_curves(mat.node_tree, node)})
+    names = _fit_inputs(mat, model_id, p)
+    if animated:
+        linked = [n for n in names if n not in animated]
+        raise BakeError(f"{', '.join(animated)} animated or driven{', ' if linked else ''}{', '.join(linked)}"
+                        f"{' linked' if linked else ''}; a fit holds for constant values or follows one texture")
+    if len(names) > 1:
+        raise BakeError(f"{', '.join(names)}: linked; a fit follows one texture-driven input")
+    socket = next((s for s in MAPPINGS[model_id].sockets(p) if s.name == names[0]), None)
+    output = image_values.linked_from(node.inputs[socket_key(node, names[0])])
+    if socket is None or output is None or output.node.bl_idname != "ShaderNodeTexImage":
+        source = output.node.bl_label if output is not None else "no"
+        raise BakeError(f"{names[0]}: fed by {source} node; a fit follows an Image Texture linked directly")
+    if socket.kind not in ("float", "color"):
+        raise BakeError(f"{socket.name}: a fit follows float and colour inputs, not {socket.kind} ones")
+    values = image_values.read_output(output.node, output.name, socket.kind, f"{output.node.name} ({socket.name})")
+    if not np.isfinite(values).all():
+        raise BakeError(f"{socket.name}: its texture has NaN or infinite texels")
+    return (choice.driven_over(model_id, p, socket.name, float(values.min()), float(values.max())),
+            _driving_image(mat, socket.name))
+
+
+def _driving_image(mat, name: str) -> list | None:
+    """The identity (name, file path, size) of the image feeding the input ``name``, or None."""
+    node = shader_node(mat)
+    output = image_values.linked_from(node.inputs[socket_key(node, name)])
+    image = getattr(output.node, "image", None) if output is not None else None
+    return None if image is None else [image.name, image.filepath, list(image.size)]
 
 
 def _input_curves(tree, node) -> list[tuple]:
@@ -331,18 +411,20 @@ def insert_layer(mat, model_id: str, p, form: str, surface) -> None:
 
 
 def _rebuild(mat, model_id: str, p, form: str, mapping: str = "analytic") -> None:
-    """Choose the mapping and build the tree first (nothing is touched if that fails), then record the parameters,
-    the choice and the bake."""
-    driven = driven_inputs(mat) if mapping != "analytic" and fittable(model_id) else []
-    chosen = choice.choose(model_id, p, form, "analytic" if driven else mapping)
+    """Choose the mapping (``plan``) and build the tree first (nothing is touched if that fails), then record the
+    parameters, the choice and the bake."""
+    asked = plan(mat, model_id, p, mapping)
+    chosen = choice.choose(model_id, p, form, asked.mapping, asked.driven)
     _build_tree(mat, model_id, p, form, chosen.fit)
     mat["lamina"] = json.dumps({"model": model_id, "params": p.to_dict(), "mapping": mapping})
-    if chosen.error or driven:
+    if chosen.error or asked.note:
         held = current_params(mat)[1]  # the key of the values as the sockets hold them (float32), as bake_constants
-        record = {"used": chosen.used, "key": choice.fit_key(model_id, held, form), "error": chosen.error}
-        if driven:
-            record["note"] = (f"{', '.join(driven)}: linked or animated; a fit holds for constant values, so the "
-                              "analytic mapping renders")
+        record = {"used": chosen.used, "key": choice.fit_key(model_id, held, form, asked.driven),
+                  "error": chosen.error}
+        if asked.note:
+            record["note"] = asked.note
+        if asked.driven is not None:
+            record.update(driven=asked.driven.to_json(), image=asked.image)
         mat[FIT_RECORD] = json.dumps(record if chosen.fit is None else {**record, "fit": chosen.fit.to_json()})
     else:
         mat.pop(FIT_RECORD, None)

@@ -5,8 +5,8 @@ import math
 
 import bpy
 
-from .expr import (BULK_INPUT, MAX_MIX_WEIGHT, METAL_MIN_RATIO, MIN_COS, MIN_LOG, MIN_TANGENT, lobe_fresnel,
-                   schlick_at_view)
+from .expr import (BULK_INPUT, MAX_CONDUCTOR_WEIGHT, MAX_MIX_WEIGHT, METAL_MIN_RATIO, MIN_COS, MIN_LOG, MIN_TANGENT,
+                   lobe_fresnel, schlick_at_view)
 
 COLUMN = 190
 ROW = 150
@@ -361,7 +361,7 @@ class NodeBackend:
         """Metallic BSDF with the physical conductor Fresnel (4.3+), whose colour inputs are then unused. 4.2 has no
         such node: a Principled metal with the complex IOR's normal-incidence reflectance as F0 (F82 model).
         [approx: conductor-f0-blender-4.2] The (grey) weight w goes through Mix Shaders, whose factor Cycles
-        clamps to [0, 1], so w up to 2 is split into min(w, 1) and min(max(w − 1, 0), 1)."""
+        clamps to [0, 1], so w up to ``MAX_CONDUCTOR_WEIGHT`` is split into min(w, 1), min(max(w − 1, 0), 1), ..."""
         depth = _depth(color, alpha, eta, k) + 1
         if hasattr(bpy.types, "ShaderNodeBsdfMetallic"):
             metal = self._node("ShaderNodeBsdfMetallic", depth, distribution="GGX", fresnel_type="PHYSICAL_CONDUCTOR")
@@ -374,7 +374,8 @@ class NodeBackend:
         for name, value in inputs.items():
             self._link_or_set(value, metal.inputs[name])
         gray = self._vector("DOT_PRODUCT", color, (1.0 / 3.0,) * 3, out="Value")
-        for part in (self.minimum(gray, 1.0), self.minimum(self.maximum(gray - 1.0, 0.0), 1.0)):
+        for j in range(MAX_CONDUCTOR_WEIGHT):
+            part = self.minimum(self.maximum(gray - float(j), 0.0), 1.0) if j else self.minimum(gray, 1.0)
             mix = self._node("ShaderNodeMixShader", max(_depth(part), depth) + 1)
             self._link_or_set(part, mix.inputs["Fac"])
             self.links.new(metal.outputs[0], mix.inputs[2])

@@ -1,13 +1,7 @@
 """Texture-driven Lamina layers in Blender: find the Image Textures linked into the Lamina node's layer inputs,
 read their pixels as Cycles sees them, and wire baked multiple-scattering maps into its ``MS`` inputs.
 
-Reading (``read_source``): ``Image.pixels`` rows start at the BOTTOM; they are flipped so that row 0 is the
-top, like ``bake.exr`` and ``bake.textures``. Float images hold scene-linear values in memory whatever their
-colour space (Blender converts them on load) and Non-Color images raw data, so both are used as they are;
-8-bit images hold the file's values, so an sRGB one is linearised as Cycles does (the sRGB transfer function)
-and a linear one used as it is; other colour spaces are refused. A Color output linked to a float input
-becomes its Rec.709 luminance, an Alpha output linked to a colour or vector input a grey, as Cycles converts
-them (the scene-linear space is assumed to be Blender's default, Rec.709).
+Reading (``read_source``): ``image_values.read_output``, the values as Cycles feeds them to the input.
 
 Wiring (``wire``): one Image Texture node per map (``bake.textures.map_layout``), tagged ``node["lamina_bake"]``,
 loaded as Non-Color with channel-packed alpha so RGB and A stay raw, sharing the source textures' Vector input
@@ -25,11 +19,10 @@ import numpy as np
 from ..bake import textures
 from ..bake.textures import BakeError
 from ..models import spongecake as model
-from . import MAPPINGS
+from . import MAPPINGS, image_values
 from . import material as lamina_material
 
 TAG = lamina_material.BAKE_TAG  # the rebuild (material._replace) recognises these nodes too
-LINEAR_SPACES = ("Linear Rec.709", "Working Space")  # 8-bit images in these hold linear values
 KINDS = {p.name: p.kind for p in model.LAYER}
 
 
@@ -52,18 +45,6 @@ def _input(node, name: str):
     return node.inputs[lamina_material.socket_key(node, name)]
 
 
-def linked_from(socket):
-    """The output socket feeding ``socket`` (through reroutes), or None when unlinked or the link is muted."""
-    while socket.is_linked:
-        link = socket.links[0]
-        if link.is_muted:
-            return None
-        if link.from_node.bl_idname != "NodeReroute":
-            return link.from_socket
-        socket = link.from_node.inputs[0]
-    return None
-
-
 def sources(mat) -> list[Source]:
     """The Image Textures driving the layer inputs of a Lamina material's node; BakeError for a layer input
     driven by anything a bake cannot follow (another node type, an input that is not texturable)."""
@@ -74,7 +55,7 @@ def sources(mat) -> list[Source]:
     for s in MAPPINGS[model_id].sockets(p):
         if s.baked or s.layer is None:  # substrate inputs do not enter the multiple-scattering prediction
             continue
-        output = linked_from(_input(node, s.name))
+        output = image_values.linked_from(_input(node, s.name))
         if output is None:
             continue
         key = (s.layer, s.param.name)
@@ -89,37 +70,8 @@ def sources(mat) -> list[Source]:
 
 
 def read_source(source: Source) -> np.ndarray:
-    """The values an input receives from its texture (module docstring): H x W or H x W x 3, row 0 = top."""
-    image = source.node.image
-    if image is None:
-        raise BakeError(f"{source.label}: the Image Texture node has no image")
-    if image.source not in ("FILE", "GENERATED"):
-        raise BakeError(f"{source.label}: {image.source.lower()} images cannot be baked; use a single image")
-    w, h = image.size
-    if w == 0 or h == 0 or len(image.pixels) == 0:
-        path = bpy.path.abspath(image.filepath) if image.filepath else "(no file path)"
-        raise BakeError(f"{source.label}: the image has no pixels: the file {path} is missing or unreadable")
-    c = image.channels
-    px = np.empty(w * h * c, dtype=np.float32)
-    image.pixels.foreach_get(px)
-    px = px.reshape(h, w, c)[::-1]  # Blender's rows start at the bottom
-    if source.output == "Alpha":
-        value = px[:, :, 3] if c == 4 else np.ones((h, w), dtype=np.float32)
-    else:
-        value = _linear(image, px[:, :, :3] if c >= 3 else np.repeat(px[:, :, :1], 3, axis=2), source.label)
-    if KINDS[source.key[1]] == "float":
-        return textures.luminance(value) if value.ndim == 3 else value
-    return value if value.ndim == 3 else np.repeat(value[:, :, None], 3, axis=2)
-
-
-def _linear(image, rgb, label: str):
-    space = image.colorspace_settings
-    if image.is_float or space.is_data or space.name in LINEAR_SPACES:
-        return rgb
-    if space.name == "sRGB":
-        return textures.srgb_to_linear(rgb)
-    raise BakeError(f"{label}: colour space {space.name!r} cannot be baked; use sRGB, Linear Rec.709 or "
-                    f"Non-Color")
+    """The values an input receives from its texture (``image_values.read_output``): row 0 = top."""
+    return image_values.read_output(source.node, source.output, KINDS[source.key[1]], source.label)
 
 
 def read_inputs(found: list[Source], warnings: list[str]) -> dict:
@@ -138,7 +90,7 @@ def read_inputs(found: list[Source], warnings: list[str]) -> dict:
 def vector_source(found: list[Source]):
     """The output socket feeding the textures' Vector inputs (None: their default UV map); BakeError when they
     differ, since one baked texel must correspond to one source texel."""
-    feeds = {s.node.name: linked_from(s.node.inputs["Vector"]) for s in found}
+    feeds = {s.node.name: image_values.linked_from(s.node.inputs["Vector"]) for s in found}
     distinct = {(f.node.name, f.identifier) if f is not None else None for f in feeds.values()}
     if len(distinct) > 1:
         raise BakeError(f"the textures {', '.join(sorted(feeds))} use different Vector inputs; Lamina bakes "

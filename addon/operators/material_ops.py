@@ -212,11 +212,15 @@ class LAMINA_OT_set_mapping(bpy.types.Operator):
             return self.execute(context)
         self.material = mat.name
         form = lamina_material.form_of(mat)
+        asked = lamina_material.plan(mat, model_id, p, self.mapping)  # reads a driving texture: main thread
         self._error = None
+        self._driven = asked.driven is not None
+        self._fraction = 0.0  # of the driven input's values fitted
 
         def work():
             try:
-                choice.choose(model_id, p, form, self.mapping)
+                choice.choose(model_id, p, form, asked.mapping, asked.driven,
+                              lambda fraction: setattr(self, "_fraction", fraction))
             except Exception as e:  # noqa: BLE001 - reported on the main thread
                 self._error = e
 
@@ -236,7 +240,9 @@ class LAMINA_OT_set_mapping(bpy.types.Operator):
             return {"PASS_THROUGH"}
         if self._thread.is_alive():
             self._ticks += 1
-            context.window_manager.progress_update(min(95, self._ticks * 2))  # about 10 s
+            # about 10 s; a driven input: the choice at its middle value, then the fits of its other values
+            percent = min(45, self._ticks) + 50 * self._fraction if self._driven else min(95, self._ticks * 2)
+            context.window_manager.progress_update(percent)
             if context.workspace is not None:
                 context.workspace.status_text_set(f"Lamina: fitting and measuring {self.material} (Esc: leave it)")
             return {"RUNNING_MODAL"}

@@ -30,6 +30,18 @@ def relative_error(img, predicted, spec):
     return metrics.rmse(img, predicted, mask) / max(predicted[mask].mean(), 1e-3)
 
 
+def texture_halves(spec):
+    """{"left", "right"}: the pixels of the plane scene ``spec`` that see the left or the right half of a texture on
+    the plane's UVs. The panorama sees the plane point x = -tan(theta) cos(phi): the texture's right half (x > 0) where
+    cos(phi) < 0; columns next to the boundary and the top row (where jittered rays cross over) are left out."""
+    import numpy as np
+
+    phi = S.pixel_geometry(spec)["phi_o"]
+    keep = np.abs(np.cos(phi)) > 0.2
+    keep[0] = False
+    return {"left": (np.cos(phi) > 0) & keep, "right": (np.cos(phi) < 0) & keep}
+
+
 # Renders a scene of a .blend at 32 px, 16 samples, into an EXR; run here and as a fresh process's script.
 SAVED_RENDER = """
 def render(blend, scene_name, out):

@@ -1,6 +1,7 @@
 """The fitted mapping in Cycles (issue 14): both forms render the fitted prediction (its view tables as a Color Ramp
 or an OSL array), a saved file renders without Lamina, and the material keeps its choice and says when it is
-stale."""
+stale. A texture-driven input: each half of a two-valued texture renders the prediction for its value, which lies
+between the tabulated ones."""
 
 import numpy as np
 import pytest
@@ -8,12 +9,14 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from addon import presets  # noqa: E402
+from addon.bake import exr  # noqa: E402
 from addon.models import MODELS  # noqa: E402
-from addon.nodes import material, predicted_image  # noqa: E402
+from addon.nodes import MAPPINGS, material, predicted_image  # noqa: E402
 from addon.operators import blend_io  # noqa: E402
+from addon.reference import metrics  # noqa: E402
 from addon.reference import scenes as S  # noqa: E402
 
-from renders import relative_error, render, renders_with_and_without_lamina  # noqa: E402
+from renders import relative_error, render, renders_with_and_without_lamina, texture_halves  # noqa: E402
 from ui_helpers import panel_text  # noqa: E402
 
 pytestmark = pytest.mark.blender
@@ -116,3 +119,72 @@ def test_the_mapping_operator_and_panel(registered):
     socket = next(s for s in material.shader_node(mat).inputs if s.type == "VALUE" and not s.is_linked)
     socket.default_value = socket.default_value * 0.5 + 0.1
     assert "Refit" in panel_text(mat)
+
+
+# ------------------------------------------------------------------------------------ a texture-driven input
+
+# amber lacquer's Absorption from an 8 x 4 float texture: two halves, and a marker texel (top left, not seen by the
+# halves' pixels) that stretches the range to [0, 2]: tabulated at 0, 0.5, 1, 1.5, 2, so every half's channel lies
+# between tabulated values, and each channel follows its own
+HALVES = {"left": (0.2, 0.9, 1.6), "right": (1.3, 0.6, 0.1)}
+MARKER = (2.0, 0.0, 0.0)
+
+
+def _driven_material(form, folder, name="textured", socket="Absorption"):
+    model_id, preset = CASES[1]
+    p = _params(model_id, preset)
+    mat = material.new_material(model_id, p, form, name=name)
+    values = np.empty((4, 8, 3))
+    values[:, :4], values[:, 4:], values[0, 0] = HALVES["left"], HALVES["right"], MARKER
+    path = folder / f"{name}.exr"
+    exr.write_exr(str(path), np.dstack([values, np.ones((4, 8))]).astype(np.float32))
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = bpy.data.images.load(str(path))
+    tex.interpolation = "Closest"
+    node = material.shader_node(mat)
+    mat.node_tree.links.new(tex.outputs["Color"], node.inputs[material.socket_key(node, socket)])
+    return mat, p, tex
+
+
+def _with_absorption(p, value):
+    return MAPPINGS["thin_coat"].with_values(p, {**MAPPINGS["thin_coat"].input_values(p), "Absorption": value})
+
+
+@pytest.mark.parametrize("form", ["nodes", "osl"])
+def test_cycles_renders_each_half_of_a_driving_texture_as_the_fit_predicts_for_its_value(form, tmp_path):
+    mat, p, _ = _driven_material(form, tmp_path)
+    material.set_mapping(mat, "fitted")
+    record, fit = material.fit_record(mat), material.fit_of(mat)
+    assert record["used"] == "fitted" and "Absorption follows its texture" in record["note"]
+    assert fit.driven.socket == "Absorption" and fit.driven.values == (0.0, 0.5, 1.0, 1.5, 2.0)
+    assert not material.fit_is_stale(mat)
+    spec = S.plane_scene(resolution=(40, 20))
+    img = render(mat, spec, 32, tmp_path)
+    predicted = {}
+    for half, mask in texture_halves(spec).items():
+        predicted[half] = predicted_image("thin_coat", _with_absorption(p, HALVES[half]), form, spec, fit)
+        error = metrics.rmse(img, predicted[half], mask) / predicted[half][mask].mean()
+        assert error < 0.02, f"{form} {half}: {error:.4f}"
+    # the test can tell: the halves differ
+    whole = S.scene_mask(spec)
+    assert np.abs(predicted["left"] - predicted["right"])[whole].mean() > 0.1 * predicted["left"][whole].mean()
+
+
+def test_a_driven_fit_is_stale_when_its_texture_is_swapped_and_other_drivers_fall_back_with_a_note(tmp_path):
+    mat, p, tex = _driven_material("nodes", tmp_path)
+    material.set_mapping(mat, "auto")
+    record = material.fit_record(mat)
+    assert record["driven"][0] == "Absorption" and record["image"][0] == tex.image.name
+    assert not material.fit_is_stale(mat)
+    _, _, other = _driven_material("nodes", tmp_path, name="other")
+    tex.image = other.image
+    assert material.fit_is_stale(mat)  # another image: its range may differ
+    material.set_mapping(mat, "auto")
+    assert not material.fit_is_stale(mat)
+    depth = material.shader_node(mat).inputs["Depth"]
+    mat.node_tree.links.new(tex.outputs["Alpha"], depth)  # a second driven input
+    assert material.fit_is_stale(mat)
+    material.set_mapping(mat, "fitted")
+    record = material.fit_record(mat)
+    assert record["used"] == "analytic" and "a fit follows one texture-driven input" in record["note"]
+    assert material.fit_of(mat) is None

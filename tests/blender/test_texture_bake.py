@@ -25,6 +25,8 @@ from addon.operators.cycles_render import render_cycles  # noqa: E402
 from addon.reference import metrics  # noqa: E402
 from addon.reference import scenes as S  # noqa: E402
 
+from renders import texture_halves  # noqa: E402
+
 pytestmark = pytest.mark.blender
 LAYER = {"type": "surface", "roughness": 0.3, "thickness": 1.0, "albedo": [0.8, 0.8, 0.8]}
 W, H = 8, 4
@@ -189,12 +191,7 @@ def _render_halves(param, form, folder):
     bake_ops.bake(mat)
     spec = S.plane_scene(resolution=(40, 20))
     img, _ = render_cycles(mat, spec, 32, 0, os.path.join(str(folder), f"{form}.exr"))
-    # the panorama sees the plane point x = -tan(theta) cos(phi): the texture's right half (x > 0) where
-    # cos(phi) < 0; columns next to the boundary and the top row (where jittered rays cross over) are left out
-    phi = S.pixel_geometry(spec)["phi_o"]
-    keep = np.abs(np.cos(phi)) > 0.2
-    keep[0] = False
-    halves = {"left": (np.cos(phi) > 0) & keep, "right": (np.cos(phi) < 0) & keep}
+    halves = texture_halves(spec)
     texel = {"left": (H - 1, 0), "right": (H - 1, W - 1)}
     predicted = {half: predicted_image(model.ID, _params({param: _texel_value(received, *texel[half])}), form, spec)
                  for half in halves}

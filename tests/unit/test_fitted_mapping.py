@@ -174,3 +174,64 @@ def test_a_closure_the_node_group_weighs_in_grey_gets_a_grey_table():
     for g in grey:
         np.testing.assert_array_equal(fit.scales[g][:, 0], fit.scales[g][:, 2])
     assert any(np.ptp(fit.scales[g], axis=1).max() > 1e-3 for g in set(fit.groups) - grey)
+
+
+# ------------------------------------------------------------------------------------ a texture-driven input
+
+def test_a_driven_input_is_tabulated_across_its_range_clamped_to_the_parameter():
+    p = _preset(thin_coat, "amber_lacquer")
+    assert choice.driven_over(thin_coat.ID, p, "Absorption", -1.0, 2.0).values == (0.0, 0.5, 1.0, 1.5, 2.0)
+    assert choice.driven_over(thin_coat.ID, p, "Depth", 0.3, 0.3).values == (0.3,)  # a constant texture
+    with pytest.raises(ValueError, match="vector"):
+        choice.driven_over(spongecake.ID, _preset(spongecake, "leaf"), "L1 Orientation", 0.0, 1.0)
+
+
+def test_driven_tables_interpolate_each_channel_at_its_own_value_and_clamp():
+    driven = fitted.Driven("Absorption", "color", (0.0, 0.5, 1.0, 1.5, 2.0))
+    rng = np.random.default_rng(1)
+    table = rng.uniform(0.1, 2.0, (5, fitted.KNOTS, 3))
+    fit = fitted.Fit(table[None], (), np.zeros((0, 5, fitted.KNOTS, 3)), 0.0, 0.0, (0,), driven)
+    value = np.array([0.2, 1.3, 2.7])  # the last channel beyond the range: the last value's table
+    wo = np.array([[np.sqrt(1 - 0.3 ** 2), 0.0, 0.3]])
+    b = NumpyBackend(wo, {"Absorption": value})
+    got = fitted.tables(b, fit)(table)[0]
+    u = float(fitted.table_coordinate(b)[0])
+    knots = np.linspace(0.0, 1.0, fitted.KNOTS)
+    at_view = np.array([[np.interp(u, knots, table[j, :, c]) for c in range(3)] for j in range(5)])
+    want = [np.interp(min(value[c], 2.0), driven.values, at_view[:, c]) for c in range(3)]
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+    again = fitted.Fit.from_arrays(fit.to_json())
+    assert again.driven == driven and again.digest() == fit.digest()
+    assert fitted.Fit.from_arrays(fitted.Fit(table[0][None], (), np.zeros((0, fitted.KNOTS, 3)), 0, 0, (0,))
+                                  .to_arrays()).driven is None
+
+
+def test_closures_alike_at_one_driven_value_only_stay_apart():
+    """The leaf's two flake layers have one roughness (0.05): one atom at that value, two at the others."""
+    from addon.nodes import _backend
+
+    p = _preset(spongecake, "leaf")
+    driven = choice.driven_over(spongecake.ID, p, "L1 Roughness", 0.05, 0.3)
+    backends = [(lambda q: lambda wo: _backend(spongecake.ID, q, "nodes", wo))(choice.at(spongecake.ID, p, driven, j))
+                for j in range(len(driven.values))]
+    at_first, at_second = fitted.atom_groups(backends[0]), fitted.atom_groups(backends[1])
+    assert max(at_first) < max(at_second)
+    assert fitted.common_groups(backends) == at_second
+
+
+def test_a_driven_fit_between_its_values_is_as_close_as_a_fit_made_there():
+    """Depth of the amber lacquer from a texture over [0.1, 1]: at 0.4375, between two tabulated values, the
+    interpolated tables are within 1% (absolute relative RMSE) of a fit made at 0.4375, on every comparison scene."""
+    p = _preset(thin_coat, "amber_lacquer")
+    driven = choice.driven_over(thin_coat.ID, p, "Depth", 0.1, 1.0)
+    made = choice.choose(thin_coat.ID, p, "osl", "fitted", driven)
+    assert made.fit.driven == driven and made.fit.scales.shape[1] == len(driven.values)
+    between = choice.at(thin_coat.ID, p, fitted.Driven("Depth", "float", (0.4375,)), 0)
+    direct = choice.fit_for(thin_coat.ID, between, "osl", made.damping)
+    errors, _ = choice.comparison_errors(thin_coat.ID, between, {"driven": ("osl", made.fit), "direct": ("osl", direct),
+                                                                   "analytic": ("osl", None)}, resolution=24,
+                                         albedo_samples=256, furnace_width=8)
+    for scene, error in errors["driven"].items():
+        assert error <= errors["direct"][scene] + 0.01, scene
+    assert choice.counted(errors["driven"], {s: 1.0 for s in errors["driven"]}) < choice.counted(
+        errors["analytic"], {s: 1.0 for s in errors["analytic"]})
