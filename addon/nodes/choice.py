@@ -6,9 +6,9 @@ measures the analytic mapping and each fit on the comparison scenes at ``CHOICE_
 resolution ``make bench`` reports; a smaller furnace): the Fitted mapping is the closer fit, and Auto keeps the
 analytic one unless the fitted one is lower by ``AUTO_MARGIN``.
 
-A texture-driven input (``driven``: ``fitted.Driven``, ``driven_over``) is tabulated at ``DRIVEN_VALUES`` values
-across the texture's range (``fitted.fit_driven``). The choice is measured at the middle value, with the fits of that
-value; the winning residual weighting is then fitted at every value.
+A texture-driven or keyframed input (``driven``: ``fitted.Driven``, ``driven_over``) is tabulated at
+``DRIVEN_VALUES`` values across its range (``fitted.fit_driven``). The choice is measured at the middle value, with
+the fits of that value; the winning residual weighting is then fitted at every value.
 """
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ SCENE_ALBEDO_SAMPLES = 1024  # per furnace pixel in the choice's scenes
 # The residual weightings fitted (``fitted.fit``'s damping): relative errors, and halfway to absolute ones. Neither
 # is best for every material, so both are fitted and the Fitted mapping is the one closer on the comparison scenes.
 DAMPINGS = (1.0, 0.5)
-DRIVEN_VALUES = 5  # tabulated values of a texture-driven input (odd: the middle one is where the choice is measured)
+DRIVEN_VALUES = 5  # tabulated values of a driven input (odd: the middle one is where the choice is measured)
 _fits: dict[str, fitted.Fit] = {}
 
 

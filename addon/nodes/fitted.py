@@ -10,10 +10,10 @@ table. Per tabulated view cosine the weights minimise the cosine-weighted error 
 forward model is ``closures_np``: the fit optimises what Cycles renders. Tables are piecewise linear in √cos θo on
 ``KNOTS`` uniform knots (``view_cosines``; a Color Ramp in node groups, a constant array in OSL: both exact).
 
-A texture-driven input (``Driven``) adds an axis: the material is fitted at ``Driven.values`` (a few values across
-the texture's range) with one set of closures, and the shader interpolates the tables linearly between them at the
-input's value per shading point (per channel for a colour input: channel c of the tables follows channel c of the
-input, exact where the material's channels are independent).
+A driven input (``Driven``: fed by a texture or keyframes) adds an axis: the material is fitted at ``Driven.values``
+(a few values across its range) with one set of closures, and the shader interpolates the tables linearly between
+them at the input's value per shading point (per channel for a colour input: channel c of the tables follows
+channel c of the input, exact where the material's channels are independent).
 
 Quadrature over ωi: a Fibonacci sphere plus samples of each narrow closure's own microfacet distribution, combined
 by the balance heuristic (multiple importance sampling), at ``AZIMUTHS`` view azimuths per knot: deterministic.
@@ -480,9 +480,9 @@ def fit_driven(problems, driven: Driven, form: str, damping: float = 1.0, progre
         if progress is not None:
             progress((done + 1) / len(order))
     ordered = [fits[j] for j in range(len(problems))]
+    errors = [float(np.mean([getattr(f, name) for f in ordered])) for name in ("error_analytic", "error_fitted")]
     return Fit(np.stack([f.scales for f in ordered], axis=1), ordered[middle].extras,
-               np.stack([f.extra_weights for f in ordered], axis=1), float(np.mean([f.error_analytic for f in ordered])),
-               float(np.mean([f.error_fitted for f in ordered])), groups, driven)
+               np.stack([f.extra_weights for f in ordered], axis=1), *errors, groups, driven)
 
 
 # ------------------------------------------------------------------------------ shading

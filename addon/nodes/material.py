@@ -8,8 +8,8 @@ With multiple scattering, the network's prediction is baked into the node's ``MS
 multiple scattering replaces only Lamina's own nodes; the user's nodes and links around them stay, and keys and
 drivers on the Lamina node's inputs move to the new node (``_replace``). The mapping (analytic, fitted, Auto;
 ``choice``) is chosen at each rebuild and recorded in ``lamina_fit`` with the fit it renders; an input fed by an
-Image Texture is tabulated over the texture's range (``plan``), other linked or animated inputs fall back to the
-analytic mapping with a note.
+Image Texture or by keyframes is tabulated over its range (``plan``), other linked or animated inputs fall back to
+the analytic mapping with a note.
 """
 from __future__ import annotations
 
@@ -251,15 +251,16 @@ def fit_of(mat):
 
 def fit_is_stale(mat) -> bool:
     """Whether the values changed since the mapping was fitted and chosen (a fitted table belongs to the values it
-    was fitted for), inputs of a fitted material became linked or animated (``driven_inputs``), or the texture a
-    driven fit follows was swapped, resized or unlinked (its pixels are not compared: edit, then Refit)."""
+    was fitted for), inputs of a fitted material became linked or animated (``driven_inputs``), or what feeds the
+    input a driven fit follows changed: another image (or its size), or the keyframes' range (a texture's pixels are
+    not compared: edit, then Refit)."""
     record = fit_record(mat)
     if record is None or shader_node(mat) is None:
         return False
     model_id, p = current_params(mat)
     driven = fitted.Driven.from_json(record["driven"]) if "driven" in record else None
     if driven is not None:
-        if _fit_inputs(mat, model_id, p) != [driven.socket] or _driving_image(mat, driven.socket) != record["image"]:
+        if _fit_inputs(mat, model_id, p) != [driven.socket] or _source(mat, driven.socket) != record["source"]:
             return True
     elif record["used"] == "fitted" and driven_inputs(mat):
         return True
@@ -268,7 +269,7 @@ def fit_is_stale(mat) -> bool:
 
 def driven_inputs(mat) -> list[str]:
     """The Lamina node's inputs whose value is not the socket's constant: linked (a texture, other nodes) or
-    animated / driven. A fit holds for constant values only, or follows one texture (``plan``)."""
+    animated / driven. A fit holds for constant values only, or follows one texture or keyframed input (``plan``)."""
     node = shader_node(mat)
     if node is None:
         return []
@@ -279,29 +280,31 @@ def driven_inputs(mat) -> list[str]:
 
 @dataclass(frozen=True)
 class Plan:
-    """What a rebuild asks ``choice.choose`` for: the ``mapping``, the texture-``driven`` input it tabulates and the
-    ``image`` feeding it (name, file path, size: staleness), or, where inputs are driven in a way no fit follows,
-    the analytic mapping and a ``note`` saying why."""
+    """What a rebuild asks ``choice.choose`` for: the ``mapping``, the ``driven`` input it tabulates and the
+    ``source`` feeding it (``_source``: staleness), or, where inputs are driven in a way no fit follows, the
+    analytic mapping and a ``note`` saying why."""
     mapping: str
     driven: fitted.Driven | None = None
-    image: list | None = None
+    source: list | None = None
     note: str = ""
 
 
 def plan(mat, model_id: str, p, mapping: str) -> Plan:
     """The ``Plan`` for giving ``mat`` (its current parameters ``p``) the ``mapping``: one float or colour input fed
-    by an Image Texture (its range read from the pixels, as Cycles sees them) is tabulated; anything else that is
-    linked or animated renders analytic, with a note."""
+    by an Image Texture (its range read from the pixels, as Cycles sees them) or by keyframes (their range over every
+    scene's frames) is tabulated; anything else that is linked or animated renders analytic, with a note."""
     if mapping == "analytic" or not fittable(model_id) or not driven_inputs(mat):
         return Plan(mapping)
     try:
-        driven, image = _texture_input(mat, model_id, p)
+        driven = _followed_input(mat, model_id, p)
     except BakeError as e:
         return Plan("analytic", note=f"{e}; the analytic mapping renders")
+    source = _source(mat, driven.socket)
     middle = driven.values[len(driven.values) // 2]
-    note = (f"{driven.socket} follows its texture: fitted at {len(driven.values)} values from {driven.values[0]:.3g} "
-            f"to {driven.values[-1]:.3g}; errors measured at {middle:.3g}")
-    return Plan(mapping, driven, image, note)
+    note = (f"{driven.socket} follows its {'texture' if source[0] == 'image' else 'keyframes'}: fitted at "
+            f"{len(driven.values)} values from {driven.values[0]:.3g} to {driven.values[-1]:.3g}; errors measured at "
+            f"{middle:.3g}")
+    return Plan(mapping, driven, source, note)
 
 
 def _fit_inputs(mat, model_id: str, p) -> list[str]:
@@ -315,37 +318,63 @@ def _name(model_id: str, p, key: str) -> str:
     return next((s.name for s in MAPPINGS[model_id].sockets(p) if _norm(s.name) == _norm(key)), key)
 
 
-def _texture_input(mat, model_id: str, p):
-    """(``fitted.Driven``, the image's identity) of the one input a fit can follow; BakeError saying why not."""
-    node = shader_node(mat)
-    animated = sorted({_name(model_id, p, name) for _, name, _ in _input_curves(mat.node_tree, node)})
+def _followed_input(mat, model_id: str, p) -> fitted.Driven:
+    """The one input a fit can follow, tabulated over its range; BakeError saying why there is none."""
     names = _fit_inputs(mat, model_id, p)
-    if animated:
-        linked = [n for n in names if n not in animated]
-        raise BakeError(f"{', '.join(animated)} animated or driven{', ' if linked else ''}{', '.join(linked)}"
-                        f"{' linked' if linked else ''}; a fit holds for constant values or follows one texture")
     if len(names) > 1:
-        raise BakeError(f"{', '.join(names)}: linked; a fit follows one texture-driven input")
+        raise BakeError(f"{', '.join(names)}: linked or animated; a fit follows one input (a texture or keyframes)")
     socket = next((s for s in MAPPINGS[model_id].sockets(p) if s.name == names[0]), None)
-    output = image_values.linked_from(node.inputs[socket_key(node, names[0])])
-    if socket is None or output is None or output.node.bl_idname != "ShaderNodeTexImage":
-        source = output.node.bl_label if output is not None else "no"
-        raise BakeError(f"{names[0]}: fed by {source} node; a fit follows an Image Texture linked directly")
-    if socket.kind not in ("float", "color"):
-        raise BakeError(f"{socket.name}: a fit follows float and colour inputs, not {socket.kind} ones")
-    values = image_values.read_output(output.node, output.name, socket.kind, f"{output.node.name} ({socket.name})")
+    if socket is None or socket.kind not in ("float", "color"):
+        raise BakeError(f"{names[0]}: a fit follows float and colour inputs, not {socket.kind if socket else 'this'}")
+    values = _input_values(mat, socket)
     if not np.isfinite(values).all():
-        raise BakeError(f"{socket.name}: its texture has NaN or infinite texels")
-    return (choice.driven_over(model_id, p, socket.name, float(values.min()), float(values.max())),
-            _driving_image(mat, socket.name))
+        raise BakeError(f"{socket.name}: NaN or infinite values (texels or keys)")
+    return choice.driven_over(model_id, p, socket.name, float(values.min()), float(values.max()))
 
 
-def _driving_image(mat, name: str) -> list | None:
-    """The identity (name, file path, size) of the image feeding the input ``name``, or None."""
+def _input_values(mat, socket) -> np.ndarray:
+    """Every value the input ``socket`` takes: its texture's texels, or its keyframed value at each frame of every
+    scene; BakeError for anything else."""
+    node = shader_node(mat)
+    key = socket_key(node, socket.name)
+    output = image_values.linked_from(node.inputs[key])
+    curves = _curves(mat, socket.name)
+    if curves and output is None:
+        if any(c.driver is not None for c in curves):
+            raise BakeError(f"{socket.name}: a driver sets it; a fit follows keyframes or one texture")
+        return _keyframed(node.inputs[key], curves)
+    if output is None or output.node.bl_idname != "ShaderNodeTexImage":
+        source = f"a {output.node.bl_label}" if output is not None else "no"
+        raise BakeError(f"{socket.name}: fed by {source} node; a fit follows an Image Texture linked directly")
+    return image_values.read_output(output.node, output.name, socket.kind, f"{output.node.name} ({socket.name})")
+
+
+def _curves(mat, name: str) -> list:
+    node = shader_node(mat)
+    return [c for c, n, _ in _input_curves(mat.node_tree, node) if _norm(n) == _norm(name)]
+
+
+def _keyframed(socket, curves) -> np.ndarray:
+    """The input's value (a colour's three channels) at every frame of every scene and at every key."""
+    frames = {float(f) for scene in bpy.data.scenes for f in range(scene.frame_start, scene.frame_end + 1)}
+    frames |= {float(k.co[0]) for c in curves for k in c.keyframe_points}
+    by_channel = {c.array_index: c for c in curves}
+    constant = np.atleast_1d(np.asarray(socket.default_value, dtype=np.float64))[:3]
+    return np.array([[by_channel[i].evaluate(f) if i in by_channel else constant[i] for i in range(len(constant))]
+                     for f in sorted(frames)])
+
+
+def _source(mat, name: str) -> list | None:
+    """What feeds the input ``name``, for staleness: ["image", name, file path, size], ["keyframes", least, greatest]
+    (over every scene's frames), or None."""
+    curves = _curves(mat, name)
     node = shader_node(mat)
     output = image_values.linked_from(node.inputs[socket_key(node, name)])
+    if curves and output is None and all(c.driver is None for c in curves):
+        values = _keyframed(node.inputs[socket_key(node, name)], curves)
+        return ["keyframes", round(float(values.min()), 6), round(float(values.max()), 6)]
     image = getattr(output.node, "image", None) if output is not None else None
-    return None if image is None else [image.name, image.filepath, list(image.size)]
+    return None if image is None else ["image", image.name, image.filepath, list(image.size)]
 
 
 def _input_curves(tree, node) -> list[tuple]:
@@ -424,7 +453,7 @@ def _rebuild(mat, model_id: str, p, form: str, mapping: str = "analytic") -> Non
         if asked.note:
             record["note"] = asked.note
         if asked.driven is not None:
-            record.update(driven=asked.driven.to_json(), image=asked.image)
+            record.update(driven=asked.driven.to_json(), source=asked.source)
         mat[FIT_RECORD] = json.dumps(record if chosen.fit is None else {**record, "fit": chosen.fit.to_json()})
     else:
         mat.pop(FIT_RECORD, None)

@@ -80,28 +80,37 @@ def test_a_saved_fitted_file_renders_the_same_without_lamina(tmp_path):
     np.testing.assert_array_equal(a, b)
 
 
-def test_an_animated_or_linked_input_falls_back_to_the_analytic_mapping_with_a_note():
+def test_a_keyframed_input_is_fitted_over_its_range_and_other_drivers_fall_back_with_a_note():
     model_id, name = CASES[1]
     mat = material.new_material(model_id, _params(model_id, name), "nodes", mapping="fitted")
-    node = material.shader_node(mat)
-    socket = next(s for s in node.inputs if s.type == "VALUE")
-    socket.keyframe_insert("default_value", frame=1)
-    animated = socket.name
-    assert material.driven_inputs(mat) == [animated]
+    depth = material.shader_node(mat).inputs["Depth"]
+    for frame, value in ((1, 0.3), (40, 0.9)):
+        depth.default_value = value
+        depth.keyframe_insert("default_value", frame=frame)
+    assert material.driven_inputs(mat) == ["Depth"]
     assert material.fit_is_stale(mat)  # the fitted tables hold for the constant value only
     material.set_mapping(mat, "fitted")
     record = material.fit_record(mat)
-    assert record["used"] == "analytic" and animated in record["note"] and material.fit_of(mat) is None
-    assert material.driven_inputs(mat) == [animated]  # the rebuilt node keeps the keys
+    assert record["used"] == "fitted" and "Depth follows its keyframes" in record["note"]
+    assert record["source"] == ["keyframes", 0.3, 0.9]
+    np.testing.assert_allclose(material.fit_of(mat).driven.values[::4], (0.3, 0.9), rtol=1e-6)
+    assert material.driven_inputs(mat) == ["Depth"]  # the rebuilt node keeps the keys
     assert not material.fit_is_stale(mat)
-    other = next(s for s in material.shader_node(mat).inputs if s.type == "VALUE" and s.name != animated)
-    value = mat.node_tree.nodes.new("ShaderNodeValue")  # a linked input (a texture would do the same)
-    mat.node_tree.links.new(value.outputs[0], other)
-    linked = other.name
-    assert linked in material.driven_inputs(mat)
-    material.set_mapping(mat, "auto")  # the rebuilt node keeps the link
+    material.shader_node(mat).inputs["Depth"].default_value = 1.5
+    material.shader_node(mat).inputs["Depth"].keyframe_insert("default_value", frame=80)
+    assert material.fit_is_stale(mat)  # the keys' range grew
+    rough = material.shader_node(mat).inputs["Top Roughness"]
+    value = mat.node_tree.nodes.new("ShaderNodeValue")  # a second driven input, not a texture
+    mat.node_tree.links.new(value.outputs[0], rough)
+    material.set_mapping(mat, "auto")  # the rebuilt node keeps the link and the keys
     record = material.fit_record(mat)
-    assert record["used"] == "analytic" and linked in record["note"]
+    assert record["used"] == "analytic" and "Depth, Top Roughness" in record["note"]
+    assert "a fit follows one input" in record["note"] and material.fit_of(mat) is None
+    mat.node_tree.links.remove(material.shader_node(mat).inputs["Top Roughness"].links[0])
+    material.shader_node(mat).inputs["Depth"].driver_add("default_value")
+    material.set_mapping(mat, "fitted")
+    record = material.fit_record(mat)
+    assert record["used"] == "analytic" and "a driver sets it" in record["note"]
 
 
 def test_the_mapping_operator_and_panel(registered):
@@ -174,7 +183,7 @@ def test_a_driven_fit_is_stale_when_its_texture_is_swapped_and_other_drivers_fal
     mat, p, tex = _driven_material("nodes", tmp_path)
     material.set_mapping(mat, "auto")
     record = material.fit_record(mat)
-    assert record["driven"][0] == "Absorption" and record["image"][0] == tex.image.name
+    assert record["driven"][0] == "Absorption" and record["source"][:2] == ["image", tex.image.name]
     assert not material.fit_is_stale(mat)
     _, _, other = _driven_material("nodes", tmp_path, name="other")
     tex.image = other.image
@@ -186,5 +195,16 @@ def test_a_driven_fit_is_stale_when_its_texture_is_swapped_and_other_drivers_fal
     assert material.fit_is_stale(mat)
     material.set_mapping(mat, "fitted")
     record = material.fit_record(mat)
-    assert record["used"] == "analytic" and "a fit follows one texture-driven input" in record["note"]
+    assert record["used"] == "analytic" and "a fit follows one input" in record["note"]
     assert material.fit_of(mat) is None
+
+
+def test_a_driving_texture_with_nan_texels_renders_the_analytic_mapping_with_a_note(tmp_path):
+    mat, _, tex = _driven_material("nodes", tmp_path)
+    values = np.ones((4, 8, 4), dtype=np.float32)
+    values[1, 2:5, 0] = np.nan
+    exr.write_exr(str(tmp_path / "holes.exr"), values)
+    tex.image = bpy.data.images.load(str(tmp_path / "holes.exr"))
+    material.set_mapping(mat, "fitted")
+    record = material.fit_record(mat)
+    assert record["used"] == "analytic" and "NaN" in record["note"] and material.fit_of(mat) is None
