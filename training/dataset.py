@@ -13,6 +13,7 @@ two independent halves, which gives its Monte Carlo noise for free: the standard
 
     python -m training.dataset --layers 1 2 --configs 1500 3000            # the documented default (hours)
     python -m training.dataset --quick --out /tmp/lamina-quick             # seconds, for tests
+    python -m training.dataset --throughput                                # paths per second (one process)
 
 Shard arrays: ``rows`` (C, L, 12) layer rows, ``wi`` (C, n_wi, 3), ``wo`` (C, n_wo, 3), ``ms`` (C, n_wi, n_wo, 3)
 the order >= 2 estimate of f (no cosine), ``ms_half_diff`` the same for a - b, ``ss`` the walk's order 1.
@@ -140,17 +141,21 @@ def shard_path(out: Path, n_layers: int, index: int) -> Path:
     return out / f"layers{n_layers}" / f"shard{index:04d}.npz"
 
 
+def shard_inputs(n_layers: int, index: int, size: Size, base_seed: int):
+    """The seeded stacks, directions and walk seeds of one shard: (rows, wi, wo, walk seeds)."""
+    rng = np.random.default_rng(np.random.SeedSequence([base_seed, n_layers, index]))
+    rows = sample_layers(rng, size.shard, n_layers)
+    wi = np.stack([stratified_hemisphere(rng, size.n_wi) for _ in range(size.shard)])
+    wo = np.stack([stratified_sphere(rng, size.n_wo) for _ in range(size.shard)])
+    return rows, wi, wo, rng.integers(0, 2**31, size.shard)
+
+
 def make_shard(job) -> str:
     out, n_layers, index, size, base_seed = job
     path = shard_path(out, n_layers, index)
     if path.exists():
         return f"{path.name} (cached)"
-    seq = np.random.SeedSequence([base_seed, n_layers, index])
-    rng = np.random.default_rng(seq)
-    rows = sample_layers(rng, size.shard, n_layers)
-    wi = np.stack([stratified_hemisphere(rng, size.n_wi) for _ in range(size.shard)])
-    wo = np.stack([stratified_sphere(rng, size.n_wo) for _ in range(size.shard)])
-    walk_seeds = rng.integers(0, 2**31, size.shard)
+    rows, wi, wo, walk_seeds = shard_inputs(n_layers, index, size, base_seed)
     results = [simulate(rows[c], wi[c], wo[c], size, int(walk_seeds[c])) for c in range(size.shard)]
     ms, diff, ss = (np.stack([r[i] for r in results]).astype(np.float32) for i in range(3))
     meta = {"version": VERSION, "seed": base_seed, "layers": n_layers, "shard": index, **asdict(size)}
@@ -183,6 +188,22 @@ def noise(data: dict) -> dict:
             "order1_relative_mae": float(np.mean(ss_err))}
 
 
+def throughput(configs: int = 6, seed: int = 3, size: Size = Size(configs=6)) -> dict:
+    """Random-walk paths per second of ``simulate`` in this process on ``configs`` seeded stacks of each layer
+    count (the default dataset's directions and paths), so that speed-ups are measured on the same work."""
+    out = {}
+    for n_layers in (1, 2):
+        rng = np.random.default_rng([seed, n_layers])
+        rows = sample_layers(rng, configs, n_layers)
+        start = time.perf_counter()
+        for c in range(configs):
+            simulate(rows[c], stratified_hemisphere(rng, size.n_wi), stratified_sphere(rng, size.n_wo), size, seed + c)
+        seconds = time.perf_counter() - start
+        out[f"layers{n_layers}"] = {"configs": configs, "seconds": round(seconds, 2),
+                                    "paths_per_second": round(configs * size.n_wi * size.paths / seconds)}
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.dataset", description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=DEFAULT_CACHE, help=f"cache folder (default {DEFAULT_CACHE})")
@@ -196,7 +217,11 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--quick", action="store_true", help="a tiny dataset for tests (seconds)")
     ap.add_argument("--noise", action="store_true", help="report the Monte Carlo noise of what is in --out")
+    ap.add_argument("--throughput", action="store_true", help="time the walk on fixed stacks (paths per second)")
     a = ap.parse_args(argv)
+    if a.throughput:
+        print(json.dumps(throughput()))
+        return 0
     if a.noise:
         for n_layers in a.layers:
             print(json.dumps({"layers": n_layers, **noise(load(a.out, n_layers))}))

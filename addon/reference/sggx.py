@@ -43,7 +43,7 @@ def matrix(s: SGGX):
     return s.a * np.eye(3) + (s.b - s.a) * np.outer(s.axis, s.axis)
 
 
-def _coords(s: SGGX, x):
+def coords(s: SGGX, x):
     """Coordinates of the rows x in the orthonormal frame (e1, e2, axis)."""
     e1, e2 = basis(s.axis)
     return x @ np.stack([e1, e2, s.axis], axis=1)
@@ -51,8 +51,8 @@ def _coords(s: SGGX, x):
 
 def _forms(s: SGGX, x, y):
     """x1 y1 + x2 y2 and x3 y3: the pieces of every quadratic form of S across and along the axis."""
-    cx = _coords(s, x)
-    cy = cx if y is x else _coords(s, y)
+    cx = coords(s, x)
+    cy = cx if y is x else coords(s, y)
     return cx[:, 0] * cy[:, 0] + cx[:, 1] * cy[:, 1], cx[:, 2] * cy[:, 2]
 
 

@@ -360,36 +360,71 @@ def _free_flight(params: Params, z, d, rng):
     return z, layer, collided
 
 
-def _nee(params: Params, state, wo_pairs, kappa_o, slots, sums, chunk=1 << 19):
-    """Next-event estimation from every vertex to each wo of its group, added to ``sums`` (N, 3) per pair."""
+def _nee(params: Params, state, wo_pairs, kappa_o, slots, sums):
+    """Next-event estimation from every vertex to each wo of its group, added to ``sums`` (N, 3) per pair: per
+    group, the whole vertices x pairs block at once (``_vertex_block``)."""
     z, d, beta, layer, surface, group = state
-    vertex, slot = np.nonzero(slots[group] >= 0)
-    for start in range(0, len(vertex), chunk):
-        v = vertex[start:start + chunk]
-        pair = slots[group[v], slot[start:start + chunk]]
-        contribution = beta[v] * _vertex_to(params, z[v], -d[v], layer[v], surface[v], wo_pairs[pair], kappa_o[:, pair])
-        for c in range(3):
-            sums[:, c] += np.bincount(pair, weights=contribution[:, c], minlength=len(sums))
+    order = np.argsort(group, kind="stable")
+    bounds = np.searchsorted(group[order], np.arange(len(slots) + 1))
+    for g in np.flatnonzero(np.diff(bounds)):
+        v = order[bounds[g]:bounds[g + 1]]
+        pairs = slots[g][slots[g] >= 0]
+        sums[pairs] += _vertex_block(params, z[v], -d[v], beta[v], layer[v], surface[v], wo_pairs[pairs],
+                                     kappa_o[:, pairs])
 
 
-def _vertex_to(params: Params, z, wi, layer, surface, wo, kappa_o):
-    """Next-event estimate towards wo of vertices at depth z reached with unit throughput from wi, (N, 3)."""
+def _vertex_block(params: Params, z, wi, beta, layer, surface, wo, kappa_o):
+    """Sum over the vertices (depth z, direction to the light wi, throughput beta) of their next-event estimates
+    towards each wo, (P, 3): the transmittance to the top or bottom, and at a volume vertex albedo F f_p / |cos wo|
+    (position-free form of the path integral, Guo et al. 2018), at the substrate its BSDF."""
     up = wo[:, 2] > 0
-    j = np.arange(len(params.layers))[:, None]
-    overlap = np.where(up, np.clip(z - j, 0.0, 1.0), np.clip(j + 1 - z, 0.0, 1.0))
-    transmittance = np.exp(-np.sum(kappa_o * overlap, axis=0))
-    value = np.zeros((len(z), 3))
-    for k, lay in enumerate(params.layers):
-        # volume vertex: albedo F f_p / |cos wo| (position-free form of the path integral, Guo et al. 2018)
-        m = ~surface & (layer == k)
-        if m.all():
-            value = np.asarray(lay.albedo) * _phase_value(lay, wi, wo) / np.abs(wo[:, 2:])
-        elif m.any():
-            value[m] = np.asarray(lay.albedo) * _phase_value(lay, wi[m], wo[m]) / np.abs(wo[m, 2:])
+    j = np.arange(len(params.layers))
+    above, below = np.clip(z[:, None] - j, 0.0, 1.0), np.clip(j + 1 - z[:, None], 0.0, 1.0)  # (V, L) overlaps
+    transmittance = np.exp(-np.where(up, above @ kappa_o, below @ kappa_o))  # (V, P)
+    out = np.zeros((len(wo), 3))
+    reach = transmittance / np.abs(wo[:, 2])
     if params.substrate is not None:
-        value[~surface & ~up] = 0.0  # the substrate blocks transmission out of the stack
-        value[surface] = substrate_bsdf(params.substrate, wi[surface], wo[surface])
-    return value * transmittance[:, None]
+        reach[:, ~up] = 0.0  # the substrate blocks transmission out of the stack
+    for k, lay in enumerate(params.layers):
+        m = ~surface & (layer == k)
+        if not m.any():
+            continue
+        pdf, fresnel_share = _phase_block(lay, wi[m], wo)
+        weight = (beta[m] * np.asarray(lay.albedo)).T  # (3, V)
+        value = weight @ (pdf * reach[m])  # (3, P)
+        if fresnel_share is not None:  # Schlick: f0 + (1 - f0) (1 - cos)^5, linear in f0
+            f0 = np.asarray(lay.f0)[:, None]
+            value = f0 * value + (1.0 - f0) * (weight @ (fresnel_share * pdf * reach[m]))
+        out += value.T
+    if params.substrate is not None and surface.any():
+        n = int(surface.sum())
+        f = substrate_bsdf(params.substrate, np.repeat(wi[surface], len(wo), axis=0), np.tile(wo, (n, 1)))
+        out += np.einsum("vc,vpc->pc", beta[surface], f.reshape(n, len(wo), 3) * transmittance[surface][..., None])
+    return out
+
+
+def _phase_block(layer: Layer, wi, wo):
+    """``_phase_pdf`` for every pair of the rows wi (V) and wo (P), (V, P), and for flakes with a Fresnel the
+    Schlick factor (1 - |wi . h|)^5 (else None). Flake forms in the frame of the SGGX axis (``sggx.coords``: free of
+    cancellation), D(h / |h|) = (|h|^2 / h^T S^-1 h)^2 / (pi sqrt(det S)) for the unnormalised h = wi + wo, formed in
+    world coordinates as ``eval`` forms it (at wo = -wi its rounding decides the limit, as there)."""
+    if not layer.is_flake:
+        return hg.eval(layer.roughness, -(wi @ wo.T)), None
+    s = _sggx(layer)
+    world = [wi[:, k, None] + wo[None, :, k] for k in range(3)]  # h as eval forms it, so limits (h -> 0) agree
+    length2 = world[0] * world[0] + world[1] * world[1] + world[2] * world[2]
+    along = sum(world[k] * s.axis[k] for k in range(3)) ** 2
+    across = np.maximum(length2 - along, 0.0)
+    cw = sggx.coords(s, wi)
+    q = across / s.a + along / s.b
+    ratio = np.divide(length2, q, out=np.zeros_like(q), where=q > 0)
+    sigma_i = np.sqrt(s.a * (cw[:, 0] ** 2 + cw[:, 1] ** 2) + s.b * cw[:, 2] ** 2)
+    pdf = ratio * ratio / (np.pi * np.sqrt(sggx.det(s)) * 4.0 * sigma_i[:, None])
+    if not layer.has_fresnel:
+        return pdf, None
+    cos = np.divide(sum(wi[:, k, None] * world[k] for k in range(3)), np.sqrt(length2), out=np.ones_like(q),
+                    where=length2 > 0)
+    return pdf, (1.0 - np.clip(np.abs(cos), 0.0, 1.0)) ** 5
 
 
 def _scatter(params: Params, state, rng):

@@ -68,6 +68,22 @@ def test_numpy_lobe_matches_the_differentiable_training_lobe(n_layers, monkeypat
     ms.predict.cache_clear()
 
 
+@pytest.mark.parametrize("n_layers", [1, 2])
+def test_the_generator_reproduces_the_shipped_validation_set(n_layers):
+    """The held-out set in tests/data was written by an earlier walk (``make validation-set``): the current one
+    (next-event estimates as blocks) gives its first configuration again, to its float32 storage."""
+    with np.load(dataset.shard_path(VALIDATION, n_layers, 0)) as shard:
+        stored = {k: shard[k] for k in ("rows", "wi", "wo", "ms", "ss")}
+        meta = json.loads(str(shard["meta"]))
+    size = dataset.Size(meta["configs"], meta["shard"], meta["n_wi"], meta["n_wo"], meta["paths"], meta["max_depth"])
+    rows, wi, wo, seeds = dataset.shard_inputs(n_layers, 0, size, meta["seed"])
+    np.testing.assert_array_equal(rows, stored["rows"])
+    ms_, _, ss = dataset.simulate(rows[0], wi[0], wo[0], size, int(seeds[0]))
+    np.testing.assert_allclose(ms_, stored["ms"][0], rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(ss, stored["ss"][0], rtol=1e-5, atol=1e-7)
+    assert stored["ms"][0].max() > 0
+
+
 def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
     data_dir, weights = tmp_path / "data", tmp_path / "weights"
     assert dataset.main(["--quick", "--out", str(data_dir), "--workers", "1"]) == 0

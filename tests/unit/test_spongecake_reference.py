@@ -59,6 +59,46 @@ GROUND_TRUTH_CASES = {
 }
 
 
+SHARP_TILTED_FLAKES = dict(layers=[dict(type="surface", roughness=1e-4, f0=[0.3, 0.5, 1], orientation=[0.3, 0, 1]),
+                                   dict(type="fiber", roughness=1e-4, thickness=0.5, orientation=[0, 1, 0.2])])
+
+
+@pytest.mark.parametrize("stack", [GROUND_TRUTH_CASES["surface tilted, Fresnel"][0], dict(layers=THREE_LAYERS),
+                                   GROUND_TRUTH_CASES["diffuse substrate"][0], FLAKES_OVER_GLASS, SHARP_TILTED_FLAKES])
+def test_next_event_blocks_equal_the_pair_by_pair_estimate(stack):
+    """The walk's next-event estimate, a vertices x directions block in closed form (quadratic forms in the SGGX
+    axis frame, transmittance as matrix products), equals the phase function and transmittance evaluated pair by
+    pair, sharp tilted flakes included."""
+    p = _params(**stack)
+    n_layers, rng = len(p.layers), np.random.default_rng(4)
+    z = rng.uniform(0.0, n_layers, 40)
+    layer = np.minimum(z.astype(int), n_layers - 1)
+    wi = sphere_directions(40, seed=5)
+    beta = rng.uniform(0.1, 1.0, (40, 3))
+    surface = (rng.random(40) < 0.3) & (p.substrate is not None)
+    z[surface] = n_layers
+    wi[surface, 2] = np.abs(wi[surface, 2])
+    wo = np.concatenate([sphere_directions(12, seed=6), -wi[:3], frames.spherical(np.ones(1), np.zeros(1))])
+    kappa = spongecake._exit_depths(p, wo)
+    block = spongecake._vertex_block(p, z, wi, beta, layer, surface, wo, kappa)
+    pairwise = np.zeros((len(wo), 3))
+    for v in range(len(z)):
+        for q, w in enumerate(wo):
+            up = w[2] > 0
+            overlap = np.clip(z[v] - np.arange(n_layers), 0, 1) if up else np.clip(np.arange(n_layers) + 1 - z[v], 0, 1)
+            transmittance = np.exp(-np.sum(kappa[:, q] * overlap))
+            if surface[v]:
+                value = spongecake.substrate_bsdf(p.substrate, wi[v:v + 1], w[None])[0]
+            elif p.substrate is not None and not up:
+                value = np.zeros(3)
+            else:
+                lay = p.layers[layer[v]]
+                value = np.asarray(lay.albedo) * spongecake._phase_value(lay, wi[v:v + 1], w[None])[0] / abs(w[2])
+            pairwise[q] += beta[v] * value * transmittance
+    assert pairwise.max() > 0
+    np.testing.assert_allclose(block, pairwise, rtol=1e-9, atol=1e-300)
+
+
 @pytest.mark.parametrize("name", GROUND_TRUTH_CASES)
 def test_single_scattering_matches_the_random_walk(name):
     stack, sides = GROUND_TRUTH_CASES[name]
