@@ -71,10 +71,11 @@ medium-networks: venv
 	$(PY) -m training.medium_train --data $(MEDIUM_DATA) --out addon/bake/weights --kinds double --minutes 15 \
 		--power-share 0.5 --off-grid $(MEDIUM_DATA)-off-grid
 
-# The held-out validation set shipped in tests/data (independent seed, 4x the paths).
+# The held-out validation set shipped in tests/data (independent seed, 4x the paths; 3 and 4 layers score the
+# grouped prediction).
 validation-set: venv
-	$(PY) -m training.dataset --out tests/data/spongecake_ms_validation --seed 1001 --configs 16 16 --shard 16 \
-		--paths 16000 --n-wi 9 --n-wo 72
+	$(PY) -m training.dataset --out tests/data/spongecake_ms_validation --seed 1001 --layers 1 2 3 4 \
+		--configs 16 16 16 16 --shard 16 --paths 16000 --n-wi 9 --n-wo 72
 
 extension: venv
 	mkdir -p dist

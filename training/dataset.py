@@ -1,7 +1,8 @@
 """Monte Carlo dataset of SpongeCake multiple scattering (Wang et al. 2022, Sec. 5 "Dataset").
 
-For random 1- and 2-layer stacks (no substrate), the reference's independent random walk
-(``addon.reference.spongecake.ground_truth``) estimates the order >= 2 part of f(wi, wo) on jittered
+For random stacks of 1 and 2 layers (the training data; 3 and 4 for the held-out check of the grouped
+prediction; no substrate), the reference's independent random walk (``addon.reference.spongecake.ground_truth``)
+estimates the order >= 2 part of f(wi, wo) on jittered
 stratified directions: ``wi`` over the upper hemisphere, ``wo`` over the whole sphere (reflection and
 transmission), both uniform in solid angle so grazing angles are covered (as in the paper). Light from below is
 the flipped stack (``addon.bake.layer_rows.flipped``), so it needs no data of its own.
@@ -207,7 +208,7 @@ def throughput(configs: int = 6, seed: int = 3, size: Size = Size(configs=6)) ->
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.dataset", description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=DEFAULT_CACHE, help=f"cache folder (default {DEFAULT_CACHE})")
-    ap.add_argument("--layers", type=int, nargs="+", default=[1, 2], choices=[1, 2])
+    ap.add_argument("--layers", type=int, nargs="+", default=[1, 2], choices=[1, 2, 3, 4])
     ap.add_argument("--configs", type=int, nargs="+", default=[1500, 3000], help="configurations per layer count")
     ap.add_argument("--paths", type=int, default=Size.paths, help="random-walk paths per wi")
     ap.add_argument("--n-wi", type=int, default=Size.n_wi)

@@ -264,7 +264,8 @@ def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.train", description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=dataset.DEFAULT_CACHE)
-    ap.add_argument("--layers", type=int, nargs="+", default=[1, 2], choices=[1, 2])
+    ap.add_argument("--layers", type=int, nargs="+", default=[1, 2], choices=[1, 2, 3, 4],
+                    help="layer counts (3 and 4: --rescore only, grouped through the two-layer network)")
     ap.add_argument("--minutes", type=float, default=20.0, help="training time per network")
     ap.add_argument("--out", type=Path, required=True, help="folder for the .npz weights (addon/bake/weights ships)")
     ap.add_argument("--validation", type=Path, default=VALIDATION_SET)
@@ -277,9 +278,18 @@ def main(argv=None) -> int:
     torch.set_num_threads(a.threads)
     if a.rescore:
         for n_layers in a.layers:
+            if n_layers > ms.NETWORK_LAYERS:  # no network of its own: score the grouped prediction, record nothing
+                scores = validation.lobe_errors(validation.load_shards(a.validation, n_layers))
+                print(json.dumps({"layers": n_layers, "grouped": True,
+                                  **{k: v for k, v in scores.items() if k != "per_config"}}))
+                continue
             scores = record_held_out(Path(a.out) / ms.weights_path(n_layers).name, a.validation)
             print(json.dumps({"layers": n_layers, **scores["held_out_validation"]}))
         return 0
+    if max(a.layers) > ms.NETWORK_LAYERS:
+        print(f"networks are trained for 1 or {ms.NETWORK_LAYERS} layers; deeper stacks are grouped (score them with "
+              f"--rescore)", file=sys.stderr)
+        return 2
     for n_layers in a.layers:
         data = dataset.load(a.data, n_layers)
         minutes = 0.05 if a.quick else a.minutes

@@ -1,6 +1,6 @@
 """SpongeCake multiple scattering (Wang et al. 2022, Sec. 5): network inputs, outputs and numpy inference.
 
-The multiple-scattering part of f for a stack of 1 or 2 layers (no substrate, light from above) is modelled as
+The multiple-scattering part of f for a stack of 1 or 2 layers (no substrate, light from above; deeper stacks below) is modelled as
 
     f_ms(wi, wo) = W1 f_ss(params', wi, wo) + W2r / pi [wi, wo on one side] + W2t / pi [opposite sides]
 
@@ -25,6 +25,13 @@ lobe parameter is a residual on the layer's own (``decode``): alpha' in [0.01, 1
 albedo' and f0' in (0, 1) (f0' = 1 for layers without Fresnel), T rho' in [0.01, 20],
 orientation' = normalize(orientation + tanh(.)); W = softplus(.). ``decode`` is written against an
 array namespace so training (torch) and inference (numpy) share it.
+
+Stacks of 3 or 4 layers (no network is trained for them) go through the two-layer network, grouped (an
+approximation of the model itself, not of a Cycles form): the layers are split into a top and a bottom group where
+the optical thickness is most even; each group is lumped into one layer (its thickest layer's type, roughness, f0
+and orientation, its summed thickness, the thickness-weighted albedo); the network's outputs for the two lumped
+layers are applied, as residuals, to every layer of their group (``grouped_raw``). Its error against Monte Carlo is
+measured on held-out 3- and 4-layer stacks (docs/training.md).
 """
 from __future__ import annotations
 
@@ -47,6 +54,7 @@ ALPHA_RANGE = (0.01, 1.0)
 G_MAX = 0.95
 THICKNESS_IN = (0.01, 10.0)
 THICKNESS_OUT = (0.01, 20.0)
+NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 
 def weights_path(n_layers: int) -> Path:
@@ -54,9 +62,10 @@ def weights_path(n_layers: int) -> Path:
 
 
 def network(n_layers: int) -> mlp.MLP:
-    if not 1 <= n_layers <= model.MS_MAX_LAYERS:
-        raise ValueError(f"multiple scattering supports 1 or {model.MS_MAX_LAYERS} layers, got {n_layers}")
-    return mlp.load(weights_path(n_layers))
+    """The network that predicts stacks of ``n_layers`` (deeper ones: the two-layer network, grouped)."""
+    if not 1 <= n_layers <= model.MAX_LAYERS:
+        raise ValueError(f"stacks have 1 to {model.MAX_LAYERS} layers, got {n_layers}")
+    return mlp.load(weights_path(min(n_layers, NETWORK_LAYERS)))
 
 
 # ------------------------------------------------------------------------------------------- encoding
@@ -156,11 +165,44 @@ def decode(raw, rows, ops=NumpyOps):
 
 # ------------------------------------------------------------------------------------------ inference
 
-def predict_rows(rows: np.ndarray):
-    """Per row set (N, L, ROW) with light from above: (lobe rows (N, L, ROW), (N, 6) Lambert weights W2r, W2t)."""
+def predict_rows(rows: np.ndarray, net: mlp.MLP | None = None):
+    """Per row set (N, L, ROW) with light from above: (lobe rows (N, L, ROW), (N, 6) Lambert weights W2r, W2t);
+    the shipped network for L layers, or ``net``; more than ``NETWORK_LAYERS`` layers grouped (module docstring)."""
     rows = np.asarray(rows, dtype=np.float64)
-    net = network(rows.shape[1])
-    return decode(net(features(rows)), rows)
+    if rows.shape[1] <= NETWORK_LAYERS:
+        return decode((net or network(rows.shape[1]))(features(rows)), rows)
+    lumped, groups = lumped_rows(rows)
+    return decode(grouped_raw((net or network(rows.shape[1]))(features(lumped)), groups), rows)
+
+
+def lumped_rows(rows: np.ndarray):
+    """(N, L, ROW) rows of L > 2 layers → (N, 2, ROW) rows of their top and bottom groups, and the group of each layer
+    (N, L) (0 top, 1 bottom). The split leaves the most even optical thickness on both sides; a group is lumped into
+    its thickest layer with the group's summed thickness and thickness-weighted albedo."""
+    n, n_layers = rows.shape[:2]
+    thickness = rows[..., rows_.THICKNESS]
+    above = np.cumsum(thickness, axis=1)[:, :-1]  # thickness of the top group for splits after layer 0 .. L-2
+    split = 1 + np.argmin(np.abs(2.0 * above - thickness.sum(axis=1, keepdims=True)), axis=1)
+    groups = (np.arange(n_layers)[None, :] >= split[:, None]).astype(int)
+    lumped = np.empty((n, 2, rows.shape[2]))
+    for g in (0, 1):
+        member = groups == g
+        t = np.where(member, thickness, 0.0)
+        thickest = np.argmax(np.where(member, thickness, -1.0), axis=1)
+        lumped[:, g] = rows[np.arange(n), thickest]
+        total = t.sum(axis=1)
+        lumped[:, g, rows_.THICKNESS] = total
+        weights = t / np.maximum(total, 1e-300)[:, None]
+        lumped[:, g, rows_.ALBEDO] = np.einsum("nl,nlc->nc", weights, rows[..., rows_.ALBEDO])
+    return lumped, groups
+
+
+def grouped_raw(raw: np.ndarray, groups: np.ndarray) -> np.ndarray:
+    """The two-layer network's raw outputs (N, 2 OUTPUTS + 7) spread to L layers (N, L OUTPUTS + 7): each layer
+    takes its group's residuals, the Lambert weights stay."""
+    layer_part = raw[:, :2 * OUTPUTS].reshape(len(raw), 2, OUTPUTS)
+    per_layer = np.take_along_axis(layer_part, groups[:, :, None], axis=1)
+    return np.concatenate([per_layer.reshape(len(raw), -1), raw[:, 2 * OUTPUTS:]], axis=1)
 
 
 @dataclass(frozen=True)
@@ -177,15 +219,12 @@ class Prediction:
 
 @lru_cache(maxsize=256)
 def predict(params: model.Params) -> Prediction:
-    if len(params.layers) > model.MS_MAX_LAYERS:
-        raise ValueError(f"multiple scattering supports 1 or {model.MS_MAX_LAYERS} layers, got {len(params.layers)}")
     return _prediction(*predict_rows(_both_sides(params)))
 
 
 def predict_with(net: mlp.MLP, params: model.Params) -> Prediction:
     """``predict`` with a given network (e.g. one being exported), uncached."""
-    both = _both_sides(params)
-    return _prediction(*decode(net(features(both)), both))
+    return _prediction(*predict_rows(_both_sides(params), net))
 
 
 def _both_sides(params: model.Params) -> np.ndarray:

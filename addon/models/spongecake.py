@@ -62,9 +62,9 @@ STACK = (
     Param("delta_transmission", "Delta transmission", "bool", False,
           description="Let unscattered light pass straight through the stack (Sec. 4.4)"),
     Param("multiple_scattering", "Multiple scattering", "bool", False,
-          description="Add the network-predicted multiple-scattering lobes (Sec. 5; stacks of 1 or 2 layers)"),
+          description="Add the network-predicted multiple-scattering lobes (Sec. 5; networks for 1 and 2 layers, "
+                      "deeper stacks grouped into two)"),
 )
-MS_MAX_LAYERS = 2  # one network per layer count is trained and shipped (addon/bake/weights)
 
 
 @dataclass(frozen=True)
@@ -137,9 +137,6 @@ def validate(data: dict) -> Validated:
     layers = tuple(_read_layer(d, i, warnings) for i, d in enumerate(layers_in))
     substrate = _read_substrate(data.get("substrate"), warnings)
     stack = read_fields(STACK, {k: data[k] for k in stack_keys if k in data}, "spongecake: ", warnings)
-    if stack["multiple_scattering"] and len(layers) > MS_MAX_LAYERS:
-        raise ParamError(f"spongecake: multiple scattering supports 1 or {MS_MAX_LAYERS} layers (one trained network "
-                         f"per layer count), got {len(layers)}; turn it off or merge layers")
     return Validated(Params(layers, substrate, **stack), warnings)
 
 

@@ -412,7 +412,7 @@ def _fcurves(action) -> list:
 
 def set_multiple_scattering(mat, on: bool) -> None:
     """Rebuild the material's Lamina node with multiple scattering on or off, keeping the current parameter
-    values and the form. Raises ParamError (material untouched) for stacks no network covers (3-4 layers)."""
+    values and the form."""
     model_id, p = current_params(mat)
     p = MODELS[model_id].validate({**p.to_dict(), "multiple_scattering": on}).params
     _rebuild(mat, model_id, p, form_of(mat))

@@ -59,7 +59,7 @@ def refusal(model_id: str, p) -> str | None:
 
 
 def has_multiple_scattering(model_id: str) -> bool:
-    return hasattr(MODELS[model_id], "MS_MAX_LAYERS")
+    return any(prm.name == "multiple_scattering" for prm in getattr(MODELS[model_id], "STACK", ()))
 
 
 def has_blends(model_id: str) -> bool:

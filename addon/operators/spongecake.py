@@ -34,7 +34,8 @@ class LAMINA_OT_add_spongecake(AddMaterialDialog, bpy.types.Operator):
     delta_transmission: bpy.props.BoolProperty(name="Delta transmission", default=False)
     multiple_scattering: bpy.props.BoolProperty(
         name="Multiple scattering", default=False,
-        description="Add the network-predicted multiple scattering (stacks of 1 or 2 layers)")
+        description="Add the network-predicted multiple scattering (networks for 1 and 2 layers; deeper stacks "
+                    "grouped in two)")
 
     def draw(self, context):
         layout = self.layout
@@ -46,16 +47,9 @@ class LAMINA_OT_add_spongecake(AddMaterialDialog, bpy.types.Operator):
             col.prop(self, f"layer_{k + 1}")
         col.prop(self, "substrate")
         col.prop(self, "delta_transmission")
-        row = layout.row()
-        row.enabled = self._layer_count() <= model.MS_MAX_LAYERS
-        row.prop(self, "multiple_scattering")
-        if not row.enabled:
-            layout.label(text=f"Multiple scattering needs 1 or {model.MS_MAX_LAYERS} layers", icon="INFO")
+        layout.prop(self, "multiple_scattering")
         layout.prop(self, "form", expand=True)
         layout.prop(self, "mapping", expand=True)
-
-    def _layer_count(self) -> int:
-        return self.layers if self.preset == CUSTOM else len(presets.load(model.ID, self.preset)["layers"])
 
     def execute(self, context):
         if self.preset == CUSTOM:
@@ -63,10 +57,7 @@ class LAMINA_OT_add_spongecake(AddMaterialDialog, bpy.types.Operator):
             data, name = scratch_dict(self.layers, types, self.substrate, self.delta_transmission), model.LABEL
         else:
             data, name = presets.load(model.ID, self.preset), f"{model.LABEL} {label(self.preset)}"
-        ms_possible = self._layer_count() <= model.MS_MAX_LAYERS
-        data["multiple_scattering"] = self.multiple_scattering and ms_possible
-        if self.multiple_scattering and not ms_possible:
-            self.report({"WARNING"}, f"Multiple scattering needs 1 or {model.MS_MAX_LAYERS} layers: left off")
+        data["multiple_scattering"] = self.multiple_scattering
         return add_material(self, context, model.ID, data, name)
 
 

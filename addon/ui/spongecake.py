@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import bpy
 
+from ..bake.spongecake import NETWORK_LAYERS
 from ..models import spongecake as model
 from ..nodes import material as lamina_material
 
@@ -18,15 +19,13 @@ def draw_extra(layout, context, mat) -> None:
     """The on/off toggle; when on, the predicted energy share or a stale warning, re-bake and texture baking."""
     box = layout.box()
     on = lamina_material.ms_enabled(mat)
-    row = box.row()
-    row.enabled = on or len(lamina_material.info(mat)["params"]["layers"]) <= model.MS_MAX_LAYERS  # off always works
-    op = row.operator("lamina.set_multiple_scattering", text="Multiple scattering", depress=on,
-                      icon="CHECKBOX_HLT" if on else "CHECKBOX_DEHLT")
+    op = box.row().operator("lamina.set_multiple_scattering", text="Multiple scattering", depress=on,
+                            icon="CHECKBOX_HLT" if on else "CHECKBOX_DEHLT")
     op.enabled = not on
-    if not row.enabled:
-        box.label(text=f"Multiple scattering needs 1 or {model.MS_MAX_LAYERS} layers", icon="INFO")
     if not on:
         return
+    if len(lamina_material.info(mat)["params"]["layers"]) > NETWORK_LAYERS:
+        box.label(text=f"{NETWORK_LAYERS}-layer network, layers grouped in two (an approximation)", icon="INFO")
     stale = lamina_material.ms_is_stale(mat)
     if stale:
         box.label(text="Parameters changed since the last bake", icon="ERROR")

@@ -112,10 +112,6 @@ def test_compare_operator_with_the_multiple_scattering_checkbox():
             assert bpy.ops.lamina.compare() == {"FINISHED"}
         assert "multiple scattering vs Monte Carlo" in settings.last_report
         assert "Lamina Compare" in bpy.data.images
-        bpy.ops.lamina.add_spongecake(preset="leaf", form="nodes")  # 3 layers: no network
-        with bpy.context.temp_override(material=obj.active_material), \
-                pytest.raises(RuntimeError, match="1 or 2 layers"):  # an ERROR report raises in scripts
-            bpy.ops.lamina.compare()
     finally:
         addon.unregister()
 
@@ -125,9 +121,7 @@ def _lamina(*args):
                           env=dict(os.environ, PYTHONPATH=ROOT), timeout=600)
 
 
-def test_cli_compare_ms_refuses_stacks_without_a_network(tmp_path):
-    r = _lamina("compare", "--preset", "leaf", "--ms", "--out", str(tmp_path))
-    assert r.returncode == 2 and "--ms" in r.stderr and "1 or 2 layers" in r.stderr
+def test_cli_compare_ms_refuses_too_few_paths(tmp_path):
     r = _lamina("compare", "--preset", "fabric", "--ms", "--ms-paths", "1", "--out", str(tmp_path))
     assert r.returncode == 2 and "--ms-paths" in r.stderr
 

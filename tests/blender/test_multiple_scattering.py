@@ -1,8 +1,9 @@
 """Multiple scattering as an artist uses it: toggled on and off, baked into the Lamina node, re-baked by hand and
-automatically (debounced), refused for 3-layer stacks, drawn in the panel and rendered by Cycles as predicted.
+automatically (debounced), grouped for 3-layer stacks, drawn in the panel and rendered by Cycles as predicted.
 Predicted values always come from the bake module (the shipped weights change with training)."""
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
@@ -10,7 +11,6 @@ bpy = pytest.importorskip("bpy")
 import addon  # noqa: E402
 from addon import presets  # noqa: E402
 from addon.models import spongecake as model  # noqa: E402
-from addon.models.params import ParamError  # noqa: E402
 from addon.nodes import MAPPINGS, material, predicted_image  # noqa: E402
 from addon.nodes.spongecake import ms_values  # noqa: E402
 from addon.operators import ms_ops  # noqa: E402
@@ -108,15 +108,17 @@ def test_rebake_leaves_linked_inputs_alone():
     assert tuple(node.inputs["MS L1 Albedo"].default_value)[:3] == pytest.approx(expected, rel=1e-6, abs=1e-7)
 
 
-def test_three_layer_stack_is_refused_and_left_untouched():
+def test_a_three_layer_stack_gets_multiple_scattering_through_the_grouped_network():
     mat = material.new_material(model.ID, _preset("leaf"), "nodes")
-    before = (mat["lamina"], [n.name for n in mat.node_tree.nodes], _inputs(mat, baked=False))
-    with pytest.raises(ParamError, match="1 or 2 layers"):
-        material.set_multiple_scattering(mat, True)
-    assert (mat["lamina"], [n.name for n in mat.node_tree.nodes], _inputs(mat, baked=False)) == before
-    with bpy.context.temp_override(material=mat), pytest.raises(RuntimeError, match="1 or 2 layers"):
-        bpy.ops.lamina.set_multiple_scattering(enabled=True)  # reported as an error
-    assert not material.ms_enabled(mat)
+    with bpy.context.temp_override(material=mat):
+        assert bpy.ops.lamina.set_multiple_scattering(enabled=True) == {"FINISHED"}
+    assert material.ms_enabled(mat) and not material.ms_is_stale(mat)
+    p = material.current_params(mat)[1]
+    baked = {name: np.ravel(value) for name, value in ms_values(p).items()}
+    assert baked and all(np.isfinite(v).all() for v in baked.values())
+    energies = [v for name, v in baked.items() if any(k in name for k in ("Albedo", "Thickness", "Reflection"))]
+    assert all((v >= 0).all() for v in energies)
+    assert baked["MS L3 Albedo"].max() > 0  # the third layer has a lobe
 
 
 def test_operators_add_toggle_and_rebake(sphere):
@@ -129,9 +131,9 @@ def test_operators_add_toggle_and_rebake(sphere):
         assert not material.ms_is_stale(mat)
         assert bpy.ops.lamina.set_multiple_scattering(enabled=False) == {"FINISHED"}
     assert not material.ms_enabled(mat)
-    # a 3-layer preset: the dialog's (disabled) checkbox is left off, with a warning
+    # a 3-layer preset: the grouped prediction
     assert bpy.ops.lamina.add_spongecake(preset="leaf", multiple_scattering=True) == {"FINISHED"}
-    assert not material.ms_enabled(sphere.active_material)
+    assert material.ms_enabled(sphere.active_material)
 
 
 def test_auto_rebake_is_debounced_and_does_not_loop(sphere):
@@ -179,8 +181,8 @@ def test_energy_share_is_the_furnace_difference():
     total = reference.furnace_albedo(p, [[0.0, 0.0, 1.0]]).mean()
     single = reference.furnace_albedo(replace(p, multiple_scattering=False), [[0.0, 0.0, 1.0]]).mean()
     assert material.ms_energy_share(mat) == pytest.approx((total - single) / total)
-    with pytest.raises(ParamError):
-        material.ms_energy_share(material.new_material(model.ID, _preset("leaf"), "nodes"))
+    share = material.ms_energy_share(material.new_material(model.ID, _preset("leaf", multiple_scattering=True), "nodes"))
+    assert 0.0 < share < 1.0  # three layers: the grouped prediction
 
 
 def test_panel_shows_toggle_share_stale_warning_and_rebake():
@@ -191,8 +193,10 @@ def test_panel_shows_toggle_share_stale_warning_and_rebake():
     assert ("lamina.bake_textures" in text) == hasattr(bpy.types, "LAMINA_OT_bake_textures")
     _set_thickness(mat, 3.0)
     assert "Parameters changed since the last bake" in panel_text(mat)
+    text = panel_text(material.new_material(model.ID, _preset("leaf", multiple_scattering=True), "nodes"))
+    assert "layers grouped in two (an approximation)" in text and "lamina.rebake" in text
     text = panel_text(material.new_material(model.ID, _preset("leaf"), "nodes"))
-    assert "Multiple scattering needs 1 or 2 layers" in text and "lamina.rebake" not in text
+    assert "lamina.set_multiple_scattering" in text and "lamina.rebake" not in text  # off: the toggle only
 
 
 @pytest.mark.parametrize("form", material.FORMS)
