@@ -11,7 +11,7 @@ DATA ?= $(HOME)/.cache/lamina/spongecake-ms
 # Neural participating media: tables of double and multiple scattering per material (resumable; docs/training.md).
 MEDIUM_DATA ?= $(HOME)/.cache/lamina/neural-medium
 
-.PHONY: venv test test-5.0 test-4.2 test-all demo bench extension dataset train validation-set medium-dataset medium-networks clean
+.PHONY: venv test test-5.0 test-4.2 test-all demo bench assets extension dataset train validation-set medium-dataset medium-networks clean
 
 venv: $(VENV)/.stamp
 
@@ -70,6 +70,10 @@ medium-networks: venv
 		--power-share 0.5 --power-range 2 --off-grid $(MEDIUM_DATA)-off-grid
 	$(PY) -m training.medium_train --data $(MEDIUM_DATA) --out addon/bake/weights --kinds double --minutes 15 \
 		--power-share 0.5 --off-grid $(MEDIUM_DATA)-off-grid
+
+# The asset library (every preset as a material asset with a preview) into $(OUT)/assets, built by this Blender.
+assets: venv
+	$(PY) -m addon.cli assets --out $(OUT)/assets --overwrite
 
 # The held-out validation set shipped in tests/data (independent seed, 4x the paths; 3 and 4 layers score the
 # grouped prediction).

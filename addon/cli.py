@@ -158,6 +158,14 @@ def build_parser() -> argparse.ArgumentParser:
     cm.add_argument("--out", required=True, help="the results folder (created; refused if it has files, see "
                                                  "--overwrite)")
     cm.add_argument("--overwrite", action="store_true", help="replace the results in an existing --out")
+    am = sub.add_parser("assets", help="write the asset library: every preset of every BSDF model as a material "
+                                       "asset with a rendered preview (lamina_library.blend and its catalogs)")
+    am.add_argument("--out", required=True, help="the library folder (created; refused if it has files, see "
+                                                 "--overwrite)")
+    am.add_argument("--overwrite", action="store_true", help="replace the contents of an existing --out")
+    _mapping_arg(am)
+    am.add_argument("--size", type=int, default=128, help="preview width and height in pixels (8 to 512)")
+    am.add_argument("--samples", type=int, default=32, help="Cycles samples per preview pixel")
     return ap
 
 
@@ -509,9 +517,22 @@ def cmd_compare_medium(args) -> int:
     return 0
 
 
+def cmd_assets(args) -> int:
+    if not 8 <= args.size <= 512:
+        raise CliError(f"--size {args.size}: expected 8 to 512 pixels")
+    if args.samples < 1:
+        raise CliError(f"--samples {args.samples}: expected at least 1")
+    out = _checked(paths.output_folder, "--out", args.out, args.overwrite)
+    from .operators import asset_library
+
+    _in_results_folder(out, lambda folder: asset_library.build(folder, args.mapping, args.size, args.samples))
+    print(f"lamina: wrote {len(asset_library.jobs())} assets to {os.path.join(out, 'lamina_library.blend')}")
+    return 0
+
+
 COMMANDS = {"list-presets": cmd_list_presets, "make-material": cmd_make_material, "compare": cmd_compare,
             "demo": cmd_demo, "bench": cmd_bench, "bake": cmd_bake, "add-porous": cmd_add_porous,
-            "bake-medium": cmd_bake_medium, "compare-medium": cmd_compare_medium}
+            "bake-medium": cmd_bake_medium, "compare-medium": cmd_compare_medium, "assets": cmd_assets}
 
 # Lamina's temporary names (``bake.exr.atomic_path``'s ".<name>.<random>.tmp.<ext>", ``paths.staged_folder``'s
 # ".<name>.<random>.lamina-tmp"): a message shows the final name instead.

@@ -5,7 +5,7 @@ import importlib
 import bpy
 
 from ..models import REGISTRY
-from . import bake_ops, compare_op, material_ops, ms_ops
+from . import asset_library, bake_ops, compare_op, material_ops, ms_ops
 
 MODEL_OPERATORS = {model_id: importlib.import_module(f".{model_id}", __name__) for model_id in REGISTRY}
 
@@ -17,6 +17,7 @@ classes = (
     ms_ops.LAMINA_OT_rebake,
     compare_op.LAMINA_OT_compare,
     bake_ops.LAMINA_OT_bake_textures,
+    *asset_library.classes,
 )
 
 

@@ -54,11 +54,7 @@ def check_material(mat, interface: str = PANEL) -> None:
 def cache_folder() -> str:
     if bpy.data.filepath:
         return bpy.path.abspath("//lamina_cache")
-    extension = ".".join(__package__.split(".")[:3])  # bl_ext.<repository>.<id>
-    try:
-        return bpy.utils.extension_path_user(extension, path="cache", create=True)
-    except ValueError:  # not installed as an extension (source tree, tests)
-        return os.path.join(tempfile.gettempdir(), "lamina_cache")
+    return blend_io.extension_folder("cache") or os.path.join(tempfile.gettempdir(), "lamina_cache")
 
 
 class BakeRun:

@@ -50,6 +50,16 @@ def save_copy(path: str) -> None:
             raise SaveError(f"Blender could not save {path}")
 
 
+def extension_folder(sub: str, create: bool = True) -> str | None:
+    """The extension's user folder ``sub`` (created unless ``create`` is false), or None when Lamina runs from a
+    source tree (tests)."""
+    extension = ".".join(__package__.split(".")[:3])  # bl_ext.<repository>.<id>
+    try:
+        return bpy.utils.extension_path_user(extension, path=sub, create=create)
+    except ValueError:
+        return None
+
+
 def preview_scene(mat, name: str) -> bpy.types.Scene:
     """A new scene (the user's scenes are untouched) with a smooth UV sphere using ``mat``, a sun and a camera."""
     scene = bpy.data.scenes.new(f"Lamina {name}")

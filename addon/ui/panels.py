@@ -10,7 +10,7 @@ import bpy
 from ..models import MEDIA, MODELS, REGISTRY
 from ..nodes import fittable
 from ..nodes import material as lamina_material
-from ..operators import MODEL_OPERATORS, compare_run
+from ..operators import MODEL_OPERATORS, asset_library, compare_run
 from ..operators.material_ops import MAPPING_ITEMS
 
 MODEL_UI = {model_id: importlib.import_module(f".{model_id}", __package__) for model_id in REGISTRY}
@@ -31,6 +31,7 @@ class LAMINA_PT_main(bpy.types.Panel):
         layout = self.layout
         mat = getattr(context, "material", None)
         _draw_add_buttons(layout.column(align=True), mat)
+        _draw_asset_library(layout)
         medium = next((MODEL_UI[m] for m in MEDIA if MODEL_UI[m].owns(mat)), None)
         if medium is not None:
             medium.draw_material(layout, context, mat)
@@ -54,6 +55,14 @@ class LAMINA_PT_main(bpy.types.Panel):
         box.label(text=model_ui.EDIT_HINT, icon="NODE")
         if hasattr(model_ui, "draw_extra"):
             model_ui.draw_extra(layout, context, mat)
+
+
+def _draw_asset_library(layout) -> None:
+    """Every preset in the Asset Browser: add the library (built if missing), or rebuild it once it is there."""
+    if asset_library.library_entry(asset_library.library_folder(create=False)) is None:
+        layout.operator("lamina.add_asset_library", icon="ASSET_MANAGER")
+    else:
+        layout.operator("lamina.build_asset_library", text="Rebuild Lamina Asset Library", icon="FILE_REFRESH")
 
 
 def _draw_add_buttons(col, mat) -> None:
