@@ -236,6 +236,7 @@ def mapping_of(mat) -> str:
     return info(mat).get("mapping", "analytic")
 
 
+DEFERRED_NOTE = "the stack changed: Refit to fit it again"
 FIT_RECORD = "lamina_fit"  # the choice's record: {"used", "key", "error"[, "fit"]} (the panel reads it)
 
 
@@ -415,7 +416,7 @@ def set_multiple_scattering(mat, on: bool) -> None:
     values and the form."""
     model_id, p = current_params(mat)
     p = MODELS[model_id].validate({**p.to_dict(), "multiple_scattering": on}).params
-    _rebuild(mat, model_id, p, form_of(mat))
+    _rebuild(mat, model_id, p, form_of(mat), mapping_of(mat), refit=False)
 
 
 def insert_layer(mat, model_id: str, p, form: str, surface) -> None:
@@ -439,17 +440,19 @@ def insert_layer(mat, model_id: str, p, form: str, surface) -> None:
     bake_constants(mat)
 
 
-def _rebuild(mat, model_id: str, p, form: str, mapping: str = "analytic") -> None:
+def _rebuild(mat, model_id: str, p, form: str, mapping: str = "analytic", refit: bool = True) -> None:
     """Choose the mapping (``plan``) and build the tree first (nothing is touched if that fails), then record the
-    parameters, the choice and the bake."""
-    asked = plan(mat, model_id, p, mapping)
+    parameters, the choice and the bake. Without ``refit`` (a toggle that must not wait seconds for a fit), a fitted
+    or Auto material keeps the user's choice but renders analytic until Refit (its record is stale)."""
+    deferred = not refit and mapping != "analytic" and fittable(model_id)
+    asked = Plan("analytic", note=DEFERRED_NOTE) if deferred else plan(mat, model_id, p, mapping)
     chosen = choice.choose(model_id, p, form, asked.mapping, asked.driven)
     _build_tree(mat, model_id, p, form, chosen.fit)
     mat["lamina"] = json.dumps({"model": model_id, "params": p.to_dict(), "mapping": mapping})
     if chosen.error or asked.note:
         held = current_params(mat)[1]  # the key of the values as the sockets hold them (float32), as bake_constants
-        record = {"used": chosen.used, "key": choice.fit_key(model_id, held, form, asked.driven),
-                  "error": chosen.error}
+        key = "" if deferred else choice.fit_key(model_id, held, form, asked.driven)  # "": stale, Refit
+        record = {"used": chosen.used, "key": key, "error": chosen.error}
         if asked.note:
             record["note"] = asked.note
         if asked.driven is not None:

@@ -90,7 +90,8 @@ def _draw_mapping(box, mat) -> None:
     if record.get("note"):
         box.label(text=record["note"], icon="INFO")
     if lamina_material.fit_is_stale(mat):
-        box.label(text="Values changed since the fit: it renders the old one", icon="ERROR")
+        renders = "the old fit" if record["used"] == "fitted" else "the analytic mapping"
+        box.label(text=f"Values changed since the fit: it renders {renders}", icon="ERROR")
         box.operator("lamina.set_mapping", text="Refit", icon="FILE_REFRESH").mapping = current
 
 

@@ -1,6 +1,7 @@
 """The Lamina asset library (issue 16): every preset of every BSDF model as a material asset with a rendered preview
 and its model's catalog, built by the running Blender; every asset loads and renders in a fresh Blender without
-Lamina; the open file is left as it was; the Asset Browser entry; the headless command."""
+Lamina; the open file is left as it was; the Asset Browser entry (the headless command's refusals:
+tests/unit/test_cli_contract.py)."""
 import os
 import subprocess
 import sys
@@ -10,7 +11,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from addon import asset_catalogs, cli  # noqa: E402
+from addon import asset_catalogs  # noqa: E402
 from addon.bake.exr import read_exr  # noqa: E402
 from addon.models import MODELS  # noqa: E402
 from addon.operators import asset_library  # noqa: E402
@@ -125,12 +126,3 @@ def test_the_asset_browser_entry_is_added_once_and_builds_a_missing_library(regi
         entry = asset_library.library_entry(str(tmp_path))
         if entry is not None:
             libraries.remove(entry)
-
-
-def test_cli_assets_refuses_a_full_folder_with_one_line(tmp_path, capsys):
-    (tmp_path / "full").mkdir()
-    (tmp_path / "full" / "x.txt").write_text("mine")
-    assert cli.main(["assets", "--out", str(tmp_path / "full")]) == 2
-    assert "--overwrite" in capsys.readouterr().err
-    assert (tmp_path / "full" / "x.txt").read_text() == "mine"
-    assert cli.main(["assets", "--out", str(tmp_path / "a"), "--size", "0"]) == 2

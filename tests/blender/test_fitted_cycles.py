@@ -69,6 +69,18 @@ def test_the_material_keeps_its_choice_and_says_when_it_is_stale():
     assert material.fit_record(mat) is None and material.fit_of(mat) is None
 
 
+def test_toggling_multiple_scattering_keeps_the_mapping_and_asks_for_a_refit(registered):
+    """The toggle does not wait for a fit: the material renders analytic, keeps the user's choice and says Refit."""
+    mat = material.new_material("spongecake", _params("spongecake", "plastic"), "nodes", mapping="fitted")
+    material.set_multiple_scattering(mat, True)
+    record = material.fit_record(mat)
+    assert material.mapping_of(mat) == "fitted" and material.ms_enabled(mat)
+    assert record["used"] == "analytic" and "Refit" in record["note"] and material.fit_of(mat) is None
+    assert material.fit_is_stale(mat) and "it renders the analytic mapping" in panel_text(mat)
+    material.set_mapping(mat, "fitted")  # the Refit
+    assert material.fit_record(mat)["used"] == "fitted" and not material.fit_is_stale(mat)
+
+
 def test_a_saved_fitted_file_renders_the_same_without_lamina(tmp_path):
     """Rendered here (Lamina loaded) and in a fresh process where Lamina cannot be imported."""
     model_id, name = CASES[0]

@@ -188,6 +188,13 @@ REFUSALS = [
     (POROUS + ("--form", "glsl", "--out", "x.blend"), "argument --form: invalid choice"),
     (POROUS + ("--out", "text.txt/x.blend"), "is a file, not a folder"),
     (POROUS, "pass --out FILE, or --overwrite"),
+    # assets
+    (("assets",), "the following arguments are required: --out"),
+    (("assets", "--out", "results"), "--out 'results' exists and is not empty; pass --overwrite"),
+    (("assets", "--out", "text.txt"), "is a file; expected a folder"),
+    (("assets", "--out", "new", "--size", "4"), "--size 4: expected 8 to 512 pixels"),
+    (("assets", "--out", "new", "--samples", "0"), "--samples 0: expected at least 1"),
+    (("assets", "--out", "new", "--mapping", "exact"), "argument --mapping: invalid choice: 'exact'"),
 ]
 
 
