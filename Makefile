@@ -48,7 +48,7 @@ demo: venv
 bench: venv
 	$(PY) -m addon.cli bench --out docs --resolution 48 --samples 32
 
-# The documented default dataset (hours on 2 cores), then the shipped networks (addon/bake/weights).
+# The documented default dataset (resumable; docs/training.md gives the walk's throughput), then the shipped networks.
 dataset: venv
 	$(PY) -m training.dataset --out $(DATA)
 

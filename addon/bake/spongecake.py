@@ -178,7 +178,8 @@ def predict_rows(rows: np.ndarray, net: mlp.MLP | None = None):
 def lumped_rows(rows: np.ndarray):
     """(N, L, ROW) rows of L > 2 layers → (N, 2, ROW) rows of their top and bottom groups, and the group of each layer
     (N, L) (0 top, 1 bottom). The split leaves the most even optical thickness on both sides; a group is lumped into
-    its thickest layer with the group's summed thickness and thickness-weighted albedo."""
+    its thickest layer with the group's summed thickness and thickness-weighted albedo (a summed thickness above the
+    network's input range acts as its end, as for any layer: ``features``)."""
     n, n_layers = rows.shape[:2]
     thickness = rows[..., rows_.THICKNESS]
     above = np.cumsum(thickness, axis=1)[:, :-1]  # thickness of the top group for splits after layer 0 .. L-2
@@ -192,7 +193,8 @@ def lumped_rows(rows: np.ndarray):
         lumped[:, g] = rows[np.arange(n), thickest]
         total = t.sum(axis=1)
         lumped[:, g, rows_.THICKNESS] = total
-        weights = t / np.maximum(total, 1e-300)[:, None]
+        weights = np.where(total[:, None] > 0, t / np.maximum(total, 1e-300)[:, None],
+                           np.arange(n_layers)[None, :] == thickest[:, None])  # all empty: the thickest's albedo
         lumped[:, g, rows_.ALBEDO] = np.einsum("nl,nlc->nc", weights, rows[..., rows_.ALBEDO])
     return lumped, groups
 

@@ -55,7 +55,7 @@ from ..models import spongecake as model
 from ..nodes import spongecake as mapping
 from . import layer_rows as rows_
 from .exr import atomic_path, write_exr
-from .spongecake import predict_rows, weights_path
+from .spongecake import NETWORK_LAYERS, predict_rows, weights_path
 
 CHUNK = 65536  # texels per network call: about 0.2 to 0.6 s, the step between progress updates
 FORMAT_VERSION = 1  # part of the cache key: bump when the maps' content or layout changes
@@ -309,7 +309,7 @@ def cache_key(p: model.Params, inputs: dict) -> str:
         a = np.ascontiguousarray(inputs[key])
         h.update(repr((key, a.dtype.str, a.shape)).encode())
         h.update(a.tobytes())
-    h.update(weights_path(len(p.layers)).read_bytes())
+    h.update(weights_path(min(len(p.layers), NETWORK_LAYERS)).read_bytes())  # deeper stacks: the two-layer one
     return h.hexdigest()[:24]
 
 

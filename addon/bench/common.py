@@ -101,6 +101,36 @@ def mapping_section(model, resolution: int) -> list[str]:
     return lines + summary
 
 
+def driven_section(model, cases, resolution: int) -> list[str]:
+    """"## Texture-driven fits": for each case (preset, shader input, least and greatest texture value), the node
+    group's error with the interpolated tables halfway between the first two and the last two tabulated values, where
+    interpolation is furthest from them, beside a fit made at that value and the analytic mapping."""
+    from ..nodes import fitted
+
+    lines = ["", "## Texture-driven fits", "",
+             f"A fitted material whose input follows a texture is fitted at {choice.DRIVEN_VALUES} values across the "
+             "texture's range and its tables are interpolated between them per shading point (`nodes.fitted.tables`): "
+             "an approximation, measured here halfway between two tabulated values (node group; mean relative RMSE "
+             "over the comparison scenes that count, as in the mapping goals).", "",
+             "| preset | input (texture range) | value | interpolated | fitted at the value | analytic |",
+             "|---|---|---|---|---|---|"]
+    with fresh_fit_cache():
+        for name, socket, lo, hi in cases:
+            p = model.params_from_dict(presets.load(model.ID, name))
+            driven = choice.driven_over(model.ID, p, socket, lo, hi)
+            made = choice.choose(model.ID, p, "nodes", "fitted", driven)
+            values = driven.values
+            for v in (0.5 * (values[0] + values[1]), 0.5 * (values[-2] + values[-1])):
+                q = choice.at(model.ID, p, fitted.Driven(socket, driven.kind, (v,)), 0)
+                shaders = {"interpolated": ("nodes", made.fit),
+                           "direct": ("nodes", choice.fit_for(model.ID, q, "nodes", made.damping)),
+                           "analytic": ("nodes", None)}
+                errors, means = comparison_errors(model.ID, q, shaders, resolution, ALBEDO_SAMPLES, furnace_width=None)
+                cells = " | ".join(pct(choice.counted(errors[label], means)) for label in shaders)
+                lines.append(f"| {name} | {socket} ({lo:g} to {hi:g}) | {v:g} | {cells} |")
+    return lines
+
+
 def _goal(scene: str, mean: float, *errors) -> str:
     if mean < choice.BACKLIT_MIN_MEAN:
         return "n/a"

@@ -16,9 +16,8 @@ from ..reference import thin_coat as reference
 from ..reference import thin_coat_truth as truth
 from ..reference import vmf, warping
 from ..reference.frames import spherical
-from .common import (approximation_header, approximation_rows, fastest_renders, mapping_section, pct,
-                     preset_render_times, preset_rows, reference_throughput,
-                     timed)
+from .common import (approximation_header, approximation_rows, driven_section, fastest_renders, mapping_section,
+                     pct, preset_render_times, preset_rows, reference_throughput, timed)
 
 MODEL = model.ID
 # The grid: κ1, κ2 ∈ {10, 1e3, 1e6}, η ∈ {1.2, 1.5, 2}, without and with absorption.
@@ -27,6 +26,8 @@ ETAS = (1.2, 1.5, 2.0)
 ABSORPTION = (0.0, 0.5)  # σa (all channels) with depth 1
 VIEWS = (0.0, 60.0)  # view angles of the ground-truth comparison (degrees)
 GT_PATHS = 40_000
+# Texture-driven fits measured between tabulated values: (preset, input, least and greatest texture value).
+DRIVEN_CASES = (("amber_lacquer", "Absorption", 0.0, 2.0), ("rough_over_smooth", "Depth", 0.1, 1.0))
 
 
 def _view(theta_deg: float):
@@ -261,7 +262,7 @@ def _mapping_section(resolution: int) -> list[str]:
              "fitted mapping (OSL) rescales the closures per view and may add some (`nodes.fitted`).",
              "", *approximation_header(MODEL)]
     return (lines + approximation_rows(model, mapping.APPROXIMATIONS, resolution) + preset_rows(model, resolution)
-            + mapping_section(model, resolution))
+            + mapping_section(model, resolution) + driven_section(model, DRIVEN_CASES, resolution))
 
 
 # ------------------------------------------------------------------------------------------ speed

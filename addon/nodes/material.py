@@ -263,18 +263,20 @@ def fit_is_stale(mat) -> bool:
     if driven is not None:
         if _fit_inputs(mat, model_id, p) != [driven.socket] or _source(mat, driven.socket) != record["source"]:
             return True
-    elif record["used"] == "fitted" and driven_inputs(mat):
+    elif record["used"] == "fitted" and _fit_inputs(mat, model_id, p):
         return True
     return record["key"] != choice.fit_key(model_id, p, form_of(mat), driven)
 
 
 def driven_inputs(mat) -> list[str]:
-    """The Lamina node's inputs whose value is not the socket's constant: linked (a texture, other nodes) or
-    animated / driven. A fit holds for constant values only, or follows one texture or keyframed input (``plan``)."""
+    """The Lamina node's inputs whose value is not the socket's constant: linked (a texture, other nodes; a muted link
+    leaves the constant) or animated / driven. A fit holds for constant values only, or follows one texture or
+    keyframed input (``plan``)."""
     node = shader_node(mat)
     if node is None:
         return []
-    names = {s.name for s in node.inputs if s.is_linked and s.name not in (BULK_INPUT, TANGENT_INPUT)}
+    names = {s.name for s in node.inputs
+             if image_values.linked_from(s) is not None and s.name not in (BULK_INPUT, TANGENT_INPUT)}
     names |= {name for _, name, _ in _input_curves(mat.node_tree, node)}
     return sorted(names)
 
@@ -292,9 +294,9 @@ class Plan:
 
 def plan(mat, model_id: str, p, mapping: str) -> Plan:
     """The ``Plan`` for giving ``mat`` (its current parameters ``p``) the ``mapping``: one float or colour input fed
-    by an Image Texture (its range read from the pixels, as Cycles sees them) or by keyframes (their range over every
-    scene's frames) is tabulated; anything else that is linked or animated renders analytic, with a note."""
-    if mapping == "analytic" or not fittable(model_id) or not driven_inputs(mat):
+    by an Image Texture (its range read from the pixels, as Cycles sees them) or by keyframes (their range,
+    ``_keyframed``) is tabulated; anything else that is linked or animated renders analytic, with a note."""
+    if mapping == "analytic" or not fittable(model_id) or not _fit_inputs(mat, model_id, p):
         return Plan(mapping)
     try:
         driven = _followed_input(mat, model_id, p)
@@ -355,10 +357,15 @@ def _curves(mat, name: str) -> list:
     return [c for c, n, _ in _input_curves(mat.node_tree, node) if _norm(n) == _norm(name)]
 
 
+KEY_SAMPLES = 16  # values sampled between two keys (a Bézier segment overshoots its keys)
+
+
 def _keyframed(socket, curves) -> np.ndarray:
-    """The input's value (a colour's three channels) at every frame of every scene and at every key."""
-    frames = {float(f) for scene in bpy.data.scenes for f in range(scene.frame_start, scene.frame_end + 1)}
-    frames |= {float(k.co[0]) for c in curves for k in c.keyframe_points}
+    """The input's value (a colour's three channels) at every key, between keys and at each scene's first and last
+    frame: the range it takes (sampled, so that a long frame range costs nothing; the panel asks on every redraw)."""
+    keys = sorted({float(k.co[0]) for c in curves for k in c.keyframe_points})
+    frames = {float(f) for scene in bpy.data.scenes for f in (scene.frame_start, scene.frame_end)}
+    frames |= {float(f) for a, b in zip(keys, keys[1:]) for f in np.linspace(a, b, KEY_SAMPLES + 1)} | set(keys)
     by_channel = {c.array_index: c for c in curves}
     constant = np.atleast_1d(np.asarray(socket.default_value, dtype=np.float64))[:3]
     return np.array([[by_channel[i].evaluate(f) if i in by_channel else constant[i] for i in range(len(constant))]
@@ -367,7 +374,7 @@ def _keyframed(socket, curves) -> np.ndarray:
 
 def _source(mat, name: str) -> list | None:
     """What feeds the input ``name``, for staleness: ["image", name, file path, size], ["keyframes", least, greatest]
-    (over every scene's frames), or None."""
+    (``_keyframed``), or None."""
     curves = _curves(mat, name)
     node = shader_node(mat)
     output = image_values.linked_from(node.inputs[socket_key(node, name)])
@@ -413,7 +420,8 @@ def _fcurves(action) -> list:
 
 def set_multiple_scattering(mat, on: bool) -> None:
     """Rebuild the material's Lamina node with multiple scattering on or off, keeping the current parameter
-    values and the form."""
+    values, the form and the user's mapping choice (a fitted or Auto material renders analytic until Refit: the
+    toggle does not wait for a fit)."""
     model_id, p = current_params(mat)
     p = MODELS[model_id].validate({**p.to_dict(), "multiple_scattering": on}).params
     _rebuild(mat, model_id, p, form_of(mat), mapping_of(mat), refit=False)

@@ -3,8 +3,8 @@ Cycles-rendered preview and a catalog per model (``asset_catalogs``), and a user
 so presets drag from the Asset Browser onto objects. Media are left out: their light is baked per object.
 
 The library is built by the running Blender (a file saved by 5.0 does not open in 4.2) into the extension's user
-folder, or a given one; one preset per step (``build_steps``), the file and its catalogs written at the end, all or
-nothing, and everything built is removed from the open file again. Its materials are ordinary node groups: they
+folder, or a given one; one preset per step (``build_steps``), the catalogs and then the file written at the end
+(nothing before every preset is done), and everything built is removed from the open file again. Its materials are ordinary node groups: they
 render without Lamina.
 """
 from __future__ import annotations
@@ -45,17 +45,23 @@ def jobs() -> list[tuple[str, str]]:
 
 def build_steps(folder: str, mapping: str = "auto", size: int = PREVIEW_SIZE, samples: int = PREVIEW_SAMPLES):
     """A generator: one preset's asset per step, yielding the fraction done; then the library and its catalogs are
-    written into ``folder``. Closing it early (a cancel) or a failure writes nothing; either way what it built is
-    removed from the open file. Its return value (``StopIteration.value``) is the library's path."""
-    before = blend_io.snapshot()
+    written into ``folder``. Closing it early (a cancel) or a failure writes nothing; either way what its steps built
+    (and only that: the user may go on working between steps) is removed from the open file. Its return value
+    (``StopIteration.value``) is the library's path."""
+    built = {}
     try:
         made, todo = [], jobs()
         for done, (model_id, name) in enumerate(todo, 1):
-            made.append(_asset(model_id, name, mapping, size, samples))
+            before = blend_io.snapshot()
+            try:
+                made.append(_asset(model_id, name, mapping, size, samples))
+            finally:
+                for c, blocks in blend_io.new_since(before).items():
+                    built.setdefault(c, set()).update(blocks)
             yield done / len(todo)
         return _write(folder, made)
     finally:
-        blend_io.remove_new_data(before)
+        blend_io.remove_blocks(built)
 
 
 def build(folder: str, mapping: str = "auto", size: int = PREVIEW_SIZE, samples: int = PREVIEW_SAMPLES) -> str:

@@ -120,8 +120,22 @@ def snapshot() -> dict:
     return {c: set(getattr(bpy.data, c)) for c in COLLECTIONS}
 
 
-def remove_new_data(before: dict) -> None:
-    """Remove every datablock created since ``before`` (objects first, so nothing is left dangling)."""
+def new_since(before: dict) -> dict:
+    """The datablocks created since the ``snapshot`` ``before``, per collection."""
+    return {c: set(getattr(bpy.data, c)) - before[c] for c in COLLECTIONS}
+
+
+def remove_blocks(blocks: dict) -> None:
+    """Remove these datablocks ({collection: set}, as ``new_since`` gives; objects first, so nothing is left
+    dangling); those already gone (an undo) are skipped."""
     for c in COLLECTIONS:
-        for block in set(getattr(bpy.data, c)) - before[c]:
-            getattr(bpy.data, c).remove(block)
+        for block in blocks.get(c, ()):
+            try:
+                getattr(bpy.data, c).remove(block)
+            except ReferenceError:
+                pass
+
+
+def remove_new_data(before: dict) -> None:
+    """Remove every datablock created since ``before``."""
+    remove_blocks(new_since(before))

@@ -212,17 +212,20 @@ class LAMINA_OT_set_mapping(bpy.types.Operator):
             return self.execute(context)
         self.material = mat.name
         form = lamina_material.form_of(mat)
-        asked = lamina_material.plan(mat, model_id, p, self.mapping)  # reads a driving texture: main thread
-        self._error = None
-        self._driven = asked.driven is not None
-        self._fraction = 0.0  # of the driven input's values fitted
+        try:
+            asked = lamina_material.plan(mat, model_id, p, self.mapping)  # reads a driving texture: main thread
+        except Exception as e:  # noqa: BLE001 - report, leave the material as it was
+            self.report({"ERROR"}, f"Could not set the mapping of {mat.name}: {e}")
+            return {"CANCELLED"}
+        # plain state the thread writes: the operator is freed when Esc ends it, the fit goes on and is cached
+        self._state = state = {"fraction": 0.0, "error": None, "driven": asked.driven is not None}
 
         def work():
             try:
                 choice.choose(model_id, p, form, asked.mapping, asked.driven,
-                              lambda fraction: setattr(self, "_fraction", fraction))
+                              lambda fraction: state.__setitem__("fraction", fraction))
             except Exception as e:  # noqa: BLE001 - reported on the main thread
-                self._error = e
+                state["error"] = e
 
         self._thread = threading.Thread(target=work, daemon=True)
         self._thread.start()
@@ -241,14 +244,15 @@ class LAMINA_OT_set_mapping(bpy.types.Operator):
         if self._thread.is_alive():
             self._ticks += 1
             # about 10 s; a driven input: the choice at its middle value, then the fits of its other values
-            percent = min(45, self._ticks) + 50 * self._fraction if self._driven else min(95, self._ticks * 2)
+            state = self._state
+            percent = min(45, self._ticks) + 50 * state["fraction"] if state["driven"] else min(95, self._ticks * 2)
             context.window_manager.progress_update(percent)
             if context.workspace is not None:
                 context.workspace.status_text_set(f"Lamina: fitting and measuring {self.material} (Esc: leave it)")
             return {"RUNNING_MODAL"}
         end_modal(context, self._timer)
-        if self._error is not None:
-            self.report({"ERROR"}, f"Could not fit {self.material}: {self._error}")
+        if self._state["error"] is not None:
+            self.report({"ERROR"}, f"Could not fit {self.material}: {self._state['error']}")
             return {"CANCELLED"}
         return self.execute(context)
 

@@ -3,6 +3,8 @@ or an OSL array), a saved file renders without Lamina, and the material keeps it
 stale. A texture-driven input: each half of a two-valued texture renders the prediction for its value, which lies
 between the tabulated ones."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -209,6 +211,22 @@ def test_a_driven_fit_is_stale_when_its_texture_is_swapped_and_other_drivers_fal
     record = material.fit_record(mat)
     assert record["used"] == "analytic" and "a fit follows one input" in record["note"]
     assert material.fit_of(mat) is None
+
+
+def test_muted_links_and_links_into_baked_inputs_leave_the_fit_alone():
+    """A muted link leaves the socket's constant (as in Cycles); the MS inputs a texture bake feeds are not the
+    material's own inputs."""
+    mat = material.new_material("thin_coat", _params(*CASES[1]), "nodes", mapping="fitted")
+    value = mat.node_tree.nodes.new("ShaderNodeValue")
+    link = mat.node_tree.links.new(value.outputs[0], material.shader_node(mat).inputs["Depth"])
+    link.is_muted = True
+    assert material.driven_inputs(mat) == [] and not material.fit_is_stale(mat)
+    p = _params("spongecake", "plastic")
+    mat = material.new_material("spongecake", replace(p, multiple_scattering=True), "nodes")
+    node = material.shader_node(mat)
+    mat.node_tree.links.new(value.outputs[0], node.inputs["MS L1 Roughness"])
+    model_id, held = material.current_params(mat)
+    assert material.plan(mat, model_id, held, "fitted") == material.Plan("fitted")
 
 
 def test_a_driving_texture_with_nan_texels_renders_the_analytic_mapping_with_a_note(tmp_path):

@@ -172,6 +172,14 @@ def test_deeper_stacks_are_lumped_into_two_groups_split_where_the_thickness_is_m
         assert (lumped[:, g, layer_rows.TYPE] == rows[np.arange(64), thickest, layer_rows.TYPE]).all()
 
 
+def test_a_group_without_thickness_is_lumped_with_its_thickest_members_albedo():
+    rows = _rows(4, n=1, seed=10)
+    rows[0, :, layer_rows.THICKNESS] = (5.0, 0.0, 0.0, 0.0)
+    lumped, groups = ms.lumped_rows(rows)
+    assert list(groups[0]) == [0, 1, 1, 1] and lumped[0, 1, layer_rows.THICKNESS] == 0.0
+    np.testing.assert_array_equal(lumped[0, 1, layer_rows.ALBEDO], rows[0, 1, layer_rows.ALBEDO])
+
+
 def test_a_layer_split_in_two_halves_gets_the_two_layer_networks_lambert_weights():
     """Three layers whose lower two are one layer cut in halves lump back into the two-layer stack."""
     two = _rows(2, n=16, seed=9)

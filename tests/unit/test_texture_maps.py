@@ -222,3 +222,21 @@ def test_synthetic_inputs_bake_without_warnings():
     assert set(inputs) == set(textures.texturable_inputs(p))
     maps = textures.bake_maps(p, inputs, warnings=warnings)
     assert warnings == [] and all(m.shape == (16, 16, 4) and np.isfinite(m).all() for m in maps.values())
+
+
+def test_a_four_layer_stack_bakes_through_the_grouped_two_layer_network(tmp_path):
+    """Deeper stacks (grouped in two): every texel is still the prediction for its own stack, and the bake is
+    cached by content like any other."""
+    layers = [{"type": "surface", "roughness": 0.3, "thickness": 1.0}, {"type": "hg", "thickness": 2.0},
+              {"type": "fiber", "roughness": 0.4, "thickness": 0.5}, {"type": "surface", "thickness": 3.0}]
+    p = model.params_from_dict({"layers": layers, "multiple_scattering": True})
+    inputs = {(2, "thickness"): np.array([[0.2, 4.0], [1.0, 8.0]])}
+    maps = textures.bake_maps(p, inputs)
+    name, channel = next((n, c) for n, entries in textures.map_layout(p).items() for c, e in enumerate(entries)
+                         if e and e[0] == "MS L3 Thickness")
+    for (y, x), t in np.ndenumerate(inputs[2, "thickness"]):
+        texel = model.params_from_dict({"layers": [*layers[:2], {**layers[2], "thickness": t}, layers[3]],
+                                        "multiple_scattering": True})
+        np.testing.assert_allclose(maps[name][y, x, channel], mapping.ms_values(texel)["MS L3 Thickness"], rtol=1e-6)
+    key = textures.cache_key(p, inputs)
+    assert textures.write_maps(maps, tmp_path, key) == textures.cached_maps(p, tmp_path, key)
