@@ -13,6 +13,8 @@ import numpy as np
 LIBRARY_FILE = "lamina_library.blend"
 CATALOG_FILE = "blender_assets.cats.txt"
 LIBRARY_NAME = "Lamina"  # the user asset-library entry
+PREVIEW_SIZE = 128  # pixels of an asset's rendered preview (square)
+PREVIEW_SAMPLES = 32
 _NAMESPACE = uuid.UUID("6f1d0c52-6a55-4b8e-9a43-6c616d696e61")
 
 

@@ -12,6 +12,7 @@ import re
 import sys
 
 from . import paths, presets
+from .asset_catalogs import PREVIEW_SAMPLES, PREVIEW_SIZE
 from .models import MODELS, REGISTRY
 from .models.params import ParamError
 from .nodes import FORMS, MAPPING_KINDS, fittable, principled_models
@@ -164,8 +165,8 @@ def build_parser() -> argparse.ArgumentParser:
                                                  "--overwrite)")
     am.add_argument("--overwrite", action="store_true", help="replace the contents of an existing --out")
     _mapping_arg(am)
-    am.add_argument("--size", type=int, default=128, help="preview width and height in pixels (8 to 512)")
-    am.add_argument("--samples", type=int, default=32, help="Cycles samples per preview pixel")
+    am.add_argument("--size", type=int, default=PREVIEW_SIZE, help="preview width and height in pixels (8 to 512)")
+    am.add_argument("--samples", type=int, default=PREVIEW_SAMPLES, help="Cycles samples per preview pixel")
     return ap
 
 

@@ -15,7 +15,8 @@ import tempfile
 import bpy
 
 from .. import presets
-from ..asset_catalogs import CATALOG_FILE, LIBRARY_FILE, LIBRARY_NAME, catalog_id, catalog_text, preview_pixels
+from ..asset_catalogs import (CATALOG_FILE, LIBRARY_FILE, LIBRARY_NAME, PREVIEW_SAMPLES, PREVIEW_SIZE, catalog_id,
+                              catalog_text, preview_pixels)
 from ..bake.exr import atomic_path
 from ..console import blender_quiet
 from ..models import MODELS
@@ -26,9 +27,6 @@ from . import blend_io
 from .cycles_render import render_cycles
 from .material_ops import MAPPING_ITEMS, label
 from .progress import begin_modal, end_modal
-
-PREVIEW_SIZE = 128  # pixels of the rendered preview (square)
-PREVIEW_SAMPLES = 32
 
 
 def library_folder(create: bool = True) -> str:
