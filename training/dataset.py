@@ -12,7 +12,7 @@ re-running skips the shards already there, so an interrupted run resumes. Every 
 two independent halves, which gives its Monte Carlo noise for free: the standard error of the stored mean is
 |a - b| / 2 per pair (``noise`` below).
 
-    python -m training.dataset --layers 1 2 --configs 1500 3000            # the documented default (hours)
+    python -m training.dataset --layers 1 2 --configs 2000 4000            # the documented default (about an hour)
     python -m training.dataset --quick --out /tmp/lamina-quick             # seconds, for tests
     python -m training.dataset --throughput                                # paths per second (one process)
 
@@ -156,10 +156,12 @@ def make_shard(job) -> str:
     path = shard_path(out, n_layers, index)
     if path.exists():
         return f"{path.name} (cached)"
+    start = time.perf_counter()
     rows, wi, wo, walk_seeds = shard_inputs(n_layers, index, size, base_seed)
     results = [simulate(rows[c], wi[c], wo[c], size, int(walk_seeds[c])) for c in range(size.shard)]
     ms, diff, ss = (np.stack([r[i] for r in results]).astype(np.float32) for i in range(3))
-    meta = {"version": VERSION, "seed": base_seed, "layers": n_layers, "shard": index, **asdict(size)}
+    meta = {"version": VERSION, "seed": base_seed, "layers": n_layers, "shard": index, **asdict(size),
+            "seconds": round(time.perf_counter() - start, 1)}
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as f:
@@ -209,7 +211,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.dataset", description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=DEFAULT_CACHE, help=f"cache folder (default {DEFAULT_CACHE})")
     ap.add_argument("--layers", type=int, nargs="+", default=[1, 2], choices=[1, 2, 3, 4])
-    ap.add_argument("--configs", type=int, nargs="+", default=[1500, 3000], help="configurations per layer count")
+    ap.add_argument("--configs", type=int, nargs="+", default=[2000, 4000], help="configurations per layer count")
     ap.add_argument("--paths", type=int, default=Size.paths, help="random-walk paths per wi")
     ap.add_argument("--n-wi", type=int, default=Size.n_wi)
     ap.add_argument("--n-wo", type=int, default=Size.n_wo)
@@ -233,11 +235,25 @@ def main(argv=None) -> int:
         size = QUICK if a.quick else Size(configs[n_layers], a.shard, a.n_wi, a.n_wo, a.paths)
         jobs += [(a.out, n_layers, i, size, a.seed) for i in range(-(-size.configs // size.shard))]
     jobs.sort(key=lambda j: (j[2], j[1]))  # interleave layer counts so a partial run has both
+    run = {"started": time.strftime("%Y-%m-%dT%H:%M:%S"), "configs": configs, "workers": a.workers, "seed": a.seed,
+           "shards": len(jobs), "made": 0, "cached": 0}
     start = time.time()
-    with Pool(max(1, a.workers)) as pool:
-        for done, name in enumerate(pool.imap(make_shard, jobs), 1):
-            print(f"[{done}/{len(jobs)}] {name}  {time.time() - start:.0f} s", flush=True)
+    try:
+        with Pool(max(1, a.workers)) as pool:
+            for done, name in enumerate(pool.imap(make_shard, jobs), 1):
+                run["cached" if name.endswith("(cached)") else "made"] += 1
+                print(f"[{done}/{len(jobs)}] {name}  {time.time() - start:.0f} s", flush=True)
+    finally:
+        log_run(a.out, {**run, "seconds": round(time.time() - start), "complete": run["made"] + run["cached"] == len(jobs)})
     return 0
+
+
+def log_run(out: Path, run: dict) -> None:
+    """One line per run (also an interrupted one) in ``runs.jsonl`` beside the shards: what was asked, what was
+    made, how long it took."""
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / "runs.jsonl", "a") as f:
+        f.write(json.dumps(run) + "\n")
 
 
 if __name__ == "__main__":

@@ -248,6 +248,7 @@ def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path
         "training_configs": info["train_configs"], "pairs_per_config": int(data["ms"].shape[1] * data["ms"].shape[2]),
         "paths_per_wi": metas[0]["paths"], "max_depth": metas[0]["max_depth"], "dataset_seed": metas[0]["seed"],
         "dataset_version": metas[0]["version"], "epochs": info["epochs"], "steps": info["steps"], "best_step": info["best_step"],
+        "dataset_worker_seconds": round(sum(m.get("seconds", 0.0) for m in metas)),
         "training_seconds": info["seconds"], "split_validation": split, "dataset_noise": dataset.noise(data),
         "date": datetime.date.today().isoformat(), "code_version": code_version(),
     }

@@ -54,6 +54,7 @@ ALPHA_RANGE = (0.01, 1.0)
 G_MAX = 0.95
 THICKNESS_IN = (0.01, 10.0)
 THICKNESS_OUT = (0.01, 20.0)
+MS_VERSION = 2  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs)
 NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 
@@ -239,3 +240,35 @@ def _prediction(lobes, weights) -> Prediction:
     below = rows_.params_from_rows(rows_.flipped(lobes[1]))
     return Prediction(above, tuple(weights[0, 0:3]), tuple(weights[0, 3:6]),
                       below, tuple(weights[1, 0:3]), tuple(weights[1, 3:6]))
+
+
+# ------------------------------------------------------------------------------------ energy scale
+
+def energy_scale(left, lobes, limit=1.0):
+    """Multiple scattering's energy scale (..., 3) from what single scattering and the Dirac leave of the stack
+    (``left``) and the albedo of the network's lobes (``lobes``): left / lobes, so that single plus multiple
+    scattering never return more than they receive, at most ``limit`` (1: the network's lobes as predicted wherever
+    they fit in; ``white_scale`` for stacks that conserve energy once white)."""
+    share = np.where(lobes > 1e-9, np.maximum(left, 0.0) / np.maximum(lobes, 1e-9), np.inf)
+    return np.minimum(share, limit)
+
+
+WHITENESS_POWER = 16  # the whiteness of a stack: its smallest albedo to this power (``whiteness_of``)
+
+
+def whiteness_of(params: model.Params) -> np.ndarray:
+    """(3,) how close a stack is to white, per channel: its smallest albedo (layers and a diffuse substrate) to the
+    power ``WHITENESS_POWER`` (1 for white, 0.44 at 0.95, 0.03 at 0.8): light scattered many times has met the
+    darkest scatterer."""
+    albedos = [layer.albedo for layer in params.layers]
+    if params.substrate is not None and params.substrate.type == "diffuse":
+        albedos.append(params.substrate.albedo)
+    return np.min(np.asarray(albedos, dtype=np.float64), axis=0) ** WHITENESS_POWER
+
+
+def white_limit(left_white, lobes_white, whiteness):
+    """The limit of the energy scale (..., 3) of a stack that conserves energy once white
+    (``models.spongecake.conserving``): left_white / lobes_white, the scale that gives the white stack exactly its
+    leftover, for a white stack; 1 (the network's lobes) far from white; in between by ``whiteness``."""
+    ratio = np.where(lobes_white > 1e-9, np.maximum(left_white, 0.0) / np.maximum(lobes_white, 1e-9), 1.0)
+    return 1.0 + np.asarray(whiteness) * (ratio - 1.0)

@@ -90,7 +90,7 @@ def map_layout(p: model.Params) -> dict:
         raise BakeError("multiple scattering is off: there is nothing to bake")
     groups = {}
     for s in mapping.sockets(p):
-        if s.baked:
+        if s.per_texel:
             groups.setdefault(s.layer, []).append(s)
     layout = {}
     for layer, group in groups.items():
@@ -285,7 +285,7 @@ def pack_maps(p: model.Params, layout: dict, lobes: np.ndarray, weights: np.ndar
     columns = _weight_columns()
     values = {s.name: (weights[:, columns[s.param.name]] if s.layer is None
                        else lobes[:, s.layer, FIELDS[s.param.name]]).reshape(n, -1)
-              for s in mapping.sockets(p) if s.baked}
+              for s in mapping.sockets(p) if s.per_texel}
     maps = {}
     for name, channels in layout.items():
         out = np.zeros((n, 4), dtype=np.float32)

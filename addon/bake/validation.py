@@ -12,7 +12,7 @@ import numpy as np
 
 from . import layer_rows
 from ..reference.spongecake import eval_multiple
-from .spongecake import predict_with
+from .spongecake import network, predict_with
 
 ARRAYS = ("rows", "wi", "wo", "ms", "ms_half_diff", "ss")
 
@@ -31,15 +31,16 @@ def load_shards(folder, n_layers: int) -> dict:
     return out
 
 
-def predicted_lobes(data: dict, net=None) -> np.ndarray:
+def predicted_lobes(data: dict, net=None, energy: bool = True) -> np.ndarray:
     """The network's multiple-scattering lobe f_ms |cos wo| at every stored pair, (C, n_wi, n_wo, 3), exactly as
-    the add-on evaluates it (``eval_multiple``), with the shipped network or ``net`` (an ``mlp.MLP``)."""
+    the add-on evaluates it (``eval_multiple``: the shipped network with its energy scale), or without the energy
+    scale (``energy`` False, or a given ``net``, an ``mlp.MLP``)."""
     out = np.zeros(data["ms"].shape)
     for c, rows in enumerate(data["rows"]):
         params = layer_rows.params_from_rows(rows)
         wi, wo = data["wi"][c].astype(float), data["wo"][c].astype(float)
         big_wi, big_wo = np.repeat(wi, len(wo), axis=0), np.tile(wo, (len(wi), 1))
-        prediction = None if net is None else predict_with(net, params)
+        prediction = None if net is None and energy else predict_with(net or network(len(rows)), params)
         f = eval_multiple(params, big_wi, big_wo, prediction) * np.abs(big_wo[:, 2:])
         out[c] = f.reshape(out[c].shape)
     return out

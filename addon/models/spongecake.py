@@ -20,6 +20,12 @@ SUBSTRATE_TYPES = ("none", "diffuse", "conductor", "dielectric")
 # Optical thickness (Tρ summed over the stack) beyond which no light crosses it: e^-30 ≈ 1e-13 along the normal,
 # and flakes along the normal or fibers in the tangent plane are at least as thick along every other direction.
 OPAQUE_THICKNESS = 30.0
+# Multiple scattering's energy scale (reference ``energy_tables``, Cycles forms' ``MS Energy`` inputs): a table over
+# the view cosine on ENERGY_KNOTS knots uniform in √μ from MIN_ENERGY_COS to 1 (dense near grazing, where the scale
+# changes fastest; views closer to grazing take the first knot's value).
+ENERGY_KNOTS = 8
+MIN_ENERGY_COS = 0.02
+ENERGY_AZIMUTHS = 8  # view azimuths per knot where a layer is oriented off the normal (the least scale is kept)
 OPAQUE_SUBSTRATES = ("diffuse", "conductor")  # a dielectric substrate refracts light through the stack
 
 # Flake roughness below this makes the SGGX matrix singular in float32; HG |g| above this is a delta.
@@ -173,3 +179,33 @@ def _read_substrate(d, warnings: list[str]) -> Substrate | None:
 
 def default_params() -> Params:
     return params_from_dict({"layers": [{}]})
+
+
+def energy_cosines():
+    """The view cosines of the energy tables' knots (``ENERGY_KNOTS``), as a list."""
+    lo = MIN_ENERGY_COS ** 0.5
+    return [(lo + (1.0 - lo) * k / (ENERGY_KNOTS - 1)) ** 2 for k in range(ENERGY_KNOTS)]
+
+
+def anisotropic(params: Params) -> bool:
+    """Whether the stack's BSDF depends on the view's azimuth: a flake or fiber layer oriented off the normal."""
+    return any(layer.is_flake and tuple(layer.orientation[:2]) != (0.0, 0.0) for layer in params.layers)
+
+
+def conserving(params: Params) -> bool:
+    """Whether the stack conserves energy once its albedos are 1: no Fresnel layer (flakes with f0 < 1 lose 1 - F),
+    and no substrate or a diffuse one."""
+    no_fresnel = not any(layer.has_fresnel for layer in params.layers)
+    return no_fresnel and (params.substrate is None or params.substrate.type == "diffuse")
+
+
+def white(params: Params) -> Params:
+    """The same stack without absorption: every albedo 1 (a diffuse substrate's too), single scattering only."""
+    data = params.to_dict()
+    for layer in data["layers"]:
+        layer["albedo"] = [1.0] * 3
+    if params.substrate is not None and params.substrate.type == "diffuse":
+        data["substrate"]["albedo"] = [1.0] * 3
+    data["multiple_scattering"] = False
+    return params_from_dict(data)
+

@@ -65,20 +65,10 @@ def predicted_eval(model_id: str, p, form: str, fit=None):
 
 
 def predicted_furnace(model_id: str, p, form: str, fit=None):
-    """``a(wo)``: what a white furnace shows through the form, directional albedo plus transparency. Closures with an
-    albedo quadrature of their own (``closures_np.ALBEDO``: Lambert, sharp Beckmann lobes) use it; the others are
-    integrated on ``reference.scenes.directional_albedo``'s direction grid."""
-    from ..reference.scenes import directional_albedo
+    """``a(wo)``: what a white furnace shows through the form (``expr.closure_furnace``)."""
+    from .expr import closure_furnace
 
-    def furnace(wo):
-        b = _backend(model_id, p, form, wo, fit)
-        own, rest = b.own_albedo()
-        if rest:
-            own = own + directional_albedo(lambda wi, w: _backend(model_id, p, form, w, fit).evaluate(wi, own=False),
-                                           wo)
-        return own + b.transparency()
-
-    return furnace
+    return lambda wo: closure_furnace(lambda w: _backend(model_id, p, form, w, fit), wo)
 
 
 def predicted_image(model_id: str, p, form: str, scene, fit=None):

@@ -30,6 +30,7 @@ BSDF: ``ggx_sampling_leak`` models it (5.0 rejects those samples).
 """
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -401,14 +402,28 @@ def beckmann_refraction_albedo(wo, alpha, ior, normal):
 
 
 def ggx_conductor_albedo(wo, alpha_x, alpha_y, tangent, eta, k, nodes: int = 32):
-    """Directional albedo (N, 3) of ``ggx_conductor``: its value times cos θi over the density of reflecting ``wo``
-    about a visible normal (Heitz 2018's sampler in the stretched frame), summed on a ``nodes`` x ``nodes``
-    product rule (Gauss-Legendre in u1, midpoint in u2): exact for lobes of any sharpness, where a direction grid
-    misses a near-mirror lobe."""
+    """Directional albedo (N, 3) of ``ggx_conductor`` (``_visible_normal_albedo``)."""
+    return _visible_normal_albedo(lambda wi: ggx_conductor(wi, wo, alpha_x, alpha_y, tangent, eta, k), wo,
+                                  alpha_x, alpha_y, (0.0, 0.0, 1.0), tangent, nodes)
+
+
+def ggx_albedo(wo, alpha_x, alpha_y=None, normal=(0.0, 0.0, 1.0), tangent=(1.0, 0.0, 0.0), f0=None, nodes: int = 32):
+    """Directional albedo (N, 3) of ``ggx_reflection`` (``_visible_normal_albedo`` around the normal Cycles bends)."""
+    bent = ensure_valid_specular_reflection(
+        _normalize(np.broadcast_to(np.asarray(normal, dtype=float), (len(wo), 3)).astype(np.float64)), wo)
+    return _visible_normal_albedo(lambda wi: ggx_reflection(wi, wo, alpha_x, alpha_y, normal, tangent, f0), wo,
+                                  alpha_x, alpha_x if alpha_y is None else alpha_y, bent, tangent, nodes)
+
+
+def _visible_normal_albedo(value_of, wo, alpha_x, alpha_y, normal, tangent, nodes: int):
+    """∫ f(ωi, ωo) cos θi dωi (N, 3) for a GGX closure's value ``value_of(wi)``: f cos θi over the density of
+    reflecting ``wo`` about a visible normal of the GGX around ``normal`` (Heitz 2018's sampler in the stretched
+    frame), summed on a ``nodes`` x ``nodes`` product rule (Gauss-Legendre in u1, midpoint in u2): exact for lobes of
+    any sharpness, where a direction grid misses a near-mirror lobe."""
     n = len(wo)
     ax = np.broadcast_to(np.asarray(alpha_x, dtype=float), (n,))
     ay = np.broadcast_to(np.asarray(alpha_y, dtype=float), (n,))
-    t, b, nz = _frame((0.0, 0.0, 1.0), tangent, n)
+    t, b, nz = _frame(normal, tangent, n)
     x, gw = np.polynomial.legendre.leggauss(nodes)
     u1, u2 = np.meshgrid(0.5 * (x + 1.0), (np.arange(nodes) + 0.5) / nodes, indexing="ij")
     weights = np.repeat(0.5 * gw / nodes, nodes)
@@ -431,9 +446,9 @@ def ggx_conductor_albedo(wo, alpha_x, alpha_y, tangent, eta, k, nodes: int = 32)
         # density of wi: D_wo(h) / (4 wo·h) with D_wo(h) = G1(wo) (wo·h) D(h) / cos θo
         g1 = 1.0 / (1.0 + ggx_lambda(lo, ax, ay))
         density = g1 * ggx_d(h, ax, ay) / (4.0 * np.maximum(lo[:, 2], 1e-300))
-        value = ggx_conductor(wi, wo, ax, ay, tangent, eta, k) * np.maximum(wi[:, 2:], 0.0)
+        value = value_of(wi) * np.maximum(wi[:, 2:], 0.0)
         out += w * np.divide(value, density[:, None], out=np.zeros_like(value), where=density[:, None] > 0)
-    return np.where((wo[:, 2] > 0)[:, None], out, 0.0)
+    return np.where(((wo[:, 2] > 0) & (lo[:, 2] > 0))[:, None], out, 0.0)
 
 
 EVAL = {
@@ -455,3 +470,8 @@ ALBEDO = {
     "beckmann_refraction": beckmann_refraction_albedo,
     "ggx_conductor": ggx_conductor_albedo,
 }
+# And GGX reflection closures of any sharpness (``ggx_albedo``), translucency (∫ cos θi / π below = 1) and the
+# transparent closure (no BSDF value: ``NumpyBackend.transparency`` counts it), where a caller asks for them
+# (``closure_furnace``): a SpongeCake form's albedo then needs no direction grid.
+SHARP_ALBEDO = {**ALBEDO, "ggx": functools.partial(ggx_albedo, nodes=16), "translucent": ALBEDO["diffuse"],
+                "transparent": lambda wo: np.zeros((len(wo), 3))}

@@ -197,25 +197,41 @@ class NumpyBackend(NumpyMath):
                 out += color * closures_np.ggx_sampling_leak(self.wo, **kw)
         return out
 
-    def own_albedo(self) -> tuple[np.ndarray, bool]:
-        """The directional albedo (N, 3) of the closures that have a quadrature of their own (``closures_np.ALBEDO``:
-        Lambert exactly, Beckmann lobes of any sharpness in slope space), and whether other closures remain (for
-        ``evaluate(wi, own=False)`` on a direction grid)."""
+    def own_albedo(self, quadratures=closures_np.ALBEDO) -> tuple[np.ndarray, bool]:
+        """The directional albedo (N, 3) of the closures that have a quadrature of their own in ``quadratures``
+        (``closures_np.ALBEDO``: Lambert exactly, Beckmann lobes of any sharpness in slope space), and whether other
+        closures remain (for ``evaluate(wi, own=False)`` on a direction grid)."""
         out = np.zeros((self.n, 3))
         for kind, color, kw in self.closures:
-            if kind in closures_np.ALBEDO:
-                out += np.broadcast_to(color, (self.n, 3)) * closures_np.ALBEDO[kind](self.wo, **kw)
-        return out, any(kind not in closures_np.ALBEDO for kind, _, _ in self.closures)
+            if kind in quadratures:
+                out += np.broadcast_to(color, (self.n, 3)) * quadratures[kind](self.wo, **kw)
+        return out, any(kind not in quadratures for kind, _, _ in self.closures)
 
-    def evaluate(self, wi: np.ndarray, own: bool = True) -> np.ndarray:
+    def evaluate(self, wi: np.ndarray, own: bool = True, quadratures=closures_np.ALBEDO) -> np.ndarray:
         """The BSDF value (no cosine) that the recorded closures give for light from ``wi`` (with ``own`` False, only
-        the closures without an albedo quadrature of their own, see ``own_albedo``)."""
+        the closures without an albedo quadrature of their own in ``quadratures``, see ``own_albedo``)."""
         wi = np.asarray(wi, dtype=np.float64)
         f = np.zeros((self.n, 3))
         for kind, color, kw in self.closures:
-            if own or kind not in closures_np.ALBEDO:
+            if own or kind not in quadratures:
                 f += color * closures_np.EVAL[kind](wi, self.wo, **kw)
         return f
+
+
+def closure_furnace(backend_at, wo: np.ndarray, quadrature=(64, 128), quadratures=closures_np.ALBEDO) -> np.ndarray:
+    """What a white furnace shows towards ``wo`` (N, 3) through the closures that ``backend_at(wo)`` records (a
+    shaded ``NumpyBackend``): directional albedo plus transparency. Closures with an albedo quadrature of their own
+    in ``quadratures`` (``closures_np.ALBEDO``: Lambert, sharp Beckmann lobes; ``closures_np.SHARP_ALBEDO`` adds
+    GGX reflection) use it; the others are integrated on ``reference.scenes.directional_albedo``'s direction grid
+    (``quadrature`` nodes)."""
+    from ..reference.scenes import directional_albedo
+
+    b = backend_at(wo)
+    own, rest = b.own_albedo(quadratures)
+    if rest:
+        own = own + directional_albedo(lambda wi, w: backend_at(w).evaluate(wi, own=False, quadratures=quadratures),
+                                       wo, quadrature)
+    return own + b.transparency()
 
 
 # ----------------------------------------------------------------------------------------------- OSL

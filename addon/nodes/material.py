@@ -29,7 +29,7 @@ from . import FORMS, MAPPING_KINDS, MAPPINGS, choice, fittable, fitted, image_va
 from .expr import BULK_INPUT, TANGENT_INPUT, NumpyBackend, OslBackend
 from .node_backend import NodeBackend
 
-GENERATOR_VERSION = 2  # bump when generated shaders change, so cached groups are not reused
+GENERATOR_VERSION = 3  # bump when generated shaders change, so cached groups are not reused
 # What the numpy prediction (and so a fit) assumes of node groups follows the running Blender: 4.2 has no Metallic
 # BSDF node.
 NumpyBackend.metallic_node = NodeBackend.has_metal()
@@ -478,21 +478,27 @@ _ms_shares: dict[str, float] = {}
 
 
 def ms_key(model_id: str, p) -> str:
-    """Identifies a multiple-scattering bake: the parameters and the manifest of the network that predicts them."""
-    network = importlib.import_module(f"..bake.{model_id}", __package__).network(len(p.layers))
-    text = json.dumps([p.to_dict(), network.manifest], sort_keys=True)
+    """Identifies a multiple-scattering bake: the parameters, the manifest of the network that predicts them and the
+    version of what is baked from its prediction (``MS_VERSION``)."""
+    bake = importlib.import_module(f"..bake.{model_id}", __package__)
+    text = json.dumps([p.to_dict(), bake.network(len(p.layers)).manifest, bake.MS_VERSION], sort_keys=True)
     return hashlib.md5(text.encode()).hexdigest()
 
 
 def bake_constants(mat) -> bool:
     """Write the network's prediction for the current parameters into the Lamina node's ``MS`` inputs (linked
     ones, e.g. driven by baked textures, are left alone) and record the bake key. Returns whether anything
-    changed; a material without multiple scattering only loses its bake key."""
+    changed; a material without multiple scattering only loses its bake key. A Lamina node that lacks some of these
+    inputs (made by an earlier Lamina) is rebuilt first, keeping the form and the mapping choice."""
     model_id, p = current_params(mat)
     node = shader_node(mat)
     if not getattr(p, "multiple_scattering", False) or node is None:
         return mat.pop(MS_KEY, None) is not None
-    changed = _write_values(node, MAPPINGS[model_id].ms_values(p))
+    values = MAPPINGS[model_id].ms_values(p)
+    if any(socket_key(node, name) not in node.inputs for name in values):  # made before these inputs existed
+        _rebuild(mat, model_id, p, form_of(mat), mapping_of(mat), refit=False)
+        return True
+    changed = _write_values(node, values)
     key = ms_key(model_id, p)
     if mat.get(MS_KEY) != key:
         mat[MS_KEY], changed = key, True
@@ -513,18 +519,14 @@ def ms_is_stale(mat) -> bool:
 
 
 def ms_energy_share(mat) -> float:
-    """The network's share of multiple scattering in the energy the material sends back and through for light
-    along the normal (white furnace, mean over RGB), cached per bake key (the first call for a stack takes
-    about 0.1 s). Raises ParamError for stacks no network covers."""
+    """The multiple-scattering closures' share of the energy the material sends back and through for light along
+    the normal as Cycles renders it (white furnace, mean over RGB; the mapping's ``ms_share``, numpy prediction),
+    cached per bake key. Raises ParamError for stacks no network covers."""
     model_id, p = current_params(mat)
     p = MODELS[model_id].validate({**p.to_dict(), "multiple_scattering": True}).params
     key = ms_key(model_id, p)
     if key not in _ms_shares:
-        reference = importlib.import_module(f"..reference.{model_id}", __package__)
-        normal = [[0.0, 0.0, 1.0]]
-        total = float(reference.furnace_albedo(p, normal).mean())
-        single = float(reference.furnace_albedo(replace(p, multiple_scattering=False), normal).mean())
-        _ms_shares[key] = max(total - single, 0.0) / total if total > 0 else 0.0
+        _ms_shares[key] = MAPPINGS[model_id].ms_share(p)
     return _ms_shares[key]
 
 

@@ -35,18 +35,26 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
   ∏ τ_j(ωo) · ∏ τ_j(60°) for transmission (layers above, layers below). [approx: mirror-attenuation]
 * substrate: its closure × ∏ τ_j(ωo) × ∏ τ_j(ωi), with ωi the mirror direction for glossy substrates and
   cos θi = 1/2 for a diffuse one (Sec. 4.4). [approx: substrate-attenuation]
-* delta transmission: transparent × ∏ τ_j(ωo) — exact (ωi = −ωo and σ is symmetric).
+* delta transmission: transparent × ∏ τ_j(ωo) — exact (ωi = −ωo and σ is symmetric); none over a substrate.
+* multiple scattering (Sec. 5): the network's lobe mapped like the layers, plus Lambert lobes, all scaled per view
+  by the baked ``MS Energy`` inputs: the reference's energy scale built on this form's own numpy prediction
+  (``energy_values``), interpolated on the view like ``reference.spongecake.energy_at``.
 
 The node-group form also evaluates Schlick's F at h = flake normal [approx: schlick-at-view];
 the OSL form evaluates it per microfacet (generalized_schlick_bsdf).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
+from functools import lru_cache
+
+import numpy as np
 
 from ..models import spongecake as model
 from ..models.params import Param
-from .expr import schlick_at_view
+from .closures_np import SHARP_ALBEDO
+from .expr import NumpyBackend, closure_furnace, schlick_at_view
 
 
 # Every approximation the mapping makes, with a configuration that isolates it (docs/accuracy.md measures
@@ -162,6 +170,11 @@ class Socket:
     baked: bool = False  # written by Lamina's bake (network prediction), not a model parameter
 
     @property
+    def per_texel(self) -> bool:
+        """Baked per texel by a texture-driven bake: every baked input but the energy scale (the material's own)."""
+        return self.baked and self.param.texturable
+
+    @property
     def panel(self) -> str:
         if self.group:
             return self.group
@@ -229,7 +242,16 @@ def _ms_sockets(p: model.Params) -> list[Socket]:
             out.append(Socket(f"{MS_PREFIX}L{k + 1} {_label(layer, prm)}", prm.kind, baked, k, MS_PANEL, True))
     weights = MS_WEIGHTS if p.substrate is None else MS_WEIGHTS[:1]
     out += [Socket(MS_PREFIX + prm.label, prm.kind, prm, None, MS_PANEL, True) for prm in weights]
-    return out
+    return out + [Socket(MS_PREFIX + prm.label, prm.kind, prm, None, MS_PANEL, True) for prm in MS_ENERGY]
+
+
+# The energy scale of the multiple-scattering closures at each knot of ``model.energy_cosines`` (``_energy``): per
+# material, not per texel (a texture-driven bake keeps the material's own).
+MS_ENERGY = tuple(
+    Param(f"energy_{k + 1}", f"Energy {k + 1}", "color", (1.0, 1.0, 1.0), 0.0, None,
+          description=f"Baked energy scale of the multiple-scattering closures seen at {math.degrees(math.acos(c)):.0f}° "
+                      "(keeps them within what single scattering leaves)")
+    for k, c in enumerate(model.energy_cosines()))
 
 
 def input_values(p: model.Params) -> dict:
@@ -257,18 +279,91 @@ def with_values(p: model.Params, values: dict) -> model.Params:
 
 
 def ms_values(p: model.Params) -> dict:
-    """The ``MS`` socket values of the network's prediction for light from above (addon.bake.spongecake)."""
+    """The ``MS`` socket values: the network's prediction for light from above (addon.bake.spongecake) and the
+    energy scale that keeps the form from returning more light than it receives (``energy_values``). Cached per
+    stack and weights folder."""
+    from ..bake import spongecake as bake
+
+    return dict(_ms_values(p, str(bake.WEIGHTS)))
+
+
+@lru_cache(maxsize=64)
+def _ms_values(p: model.Params, weights: str) -> dict:
+    return {**_lobe_values(p), **energy_values(p)}
+
+
+def _lobe_values(p: model.Params) -> dict:
     from ..bake.spongecake import predict
 
     pred = predict(p)
     weights = {"reflection": pred.reflection, "transmission": pred.transmission}
     values = {}
     for s in _ms_sockets(p):
+        if s.param in MS_ENERGY:
+            continue
         if s.layer is None:
             values[s.name] = weights[s.param.name]
         else:
             values[s.name] = getattr(pred.lobe.layers[s.layer], s.param.name)
     return values
+
+
+# The albedos behind ``energy_values``: GGX reflection by its own quadrature (flakes may be near-mirrors), the other
+# closures on a direction grid a quarter of the default.
+ENERGY_QUADRATURE = (32, 64)
+
+
+def energy_values(p: model.Params) -> dict:
+    """The ``MS Energy`` inputs: the reference's energy scale (``reference.spongecake.energy_tables``) computed on
+    what Cycles renders (its numpy prediction, OSL form): what the form's single scattering and Dirac leave, over
+    the albedo of its multiple-scattering closures, so that the rendered furnace stays at most 1 (and is 1 for a
+    white isotropic stack at the knots) whatever the single-scattering mapping's error."""
+    from ..bake.spongecake import energy_scale, white_limit, whiteness_of
+
+    mu = np.asarray(model.energy_cosines())
+    n_phi = model.ENERGY_AZIMUTHS if model.anisotropic(p) else 1
+    phi = np.tile(np.arange(n_phi) * (2.0 * math.pi / n_phi), len(mu))
+    sin = np.sqrt(1.0 - np.repeat(mu, n_phi) ** 2)
+    wo = np.stack([sin * np.cos(phi), sin * np.sin(phi), np.repeat(mu, n_phi)], axis=1)
+    limit = 1.0
+    if model.conserving(p):
+        plain = model.white(p)
+        limit = white_limit(_left(plain, wo), _ms_furnace(plain, wo), whiteness_of(p))
+    scale = energy_scale(_left(p, wo), _ms_furnace(p, wo), limit).reshape(len(mu), n_phi, 3).min(axis=1)
+    return {MS_PREFIX + prm.label: tuple(float(v) for v in row) for prm, row in zip(MS_ENERGY, scale)}
+
+
+def ms_share(p: model.Params) -> float:
+    """The multiple-scattering closures' share of the energy the form sends back and through for light along the
+    normal (white furnace, mean over RGB; the Dirac counted as the material has it), from the numpy prediction."""
+    normal = np.array([[0.0, 0.0, 1.0]])
+    single = replace(p, multiple_scattering=False)
+    ss = closure_furnace(lambda w: _numpy_shaded(single, input_values(single), w, shade), normal, ENERGY_QUADRATURE,
+                         SHARP_ALBEDO)
+    ms = _ms_furnace(p, normal) * np.asarray(ms_values(p)[MS_PREFIX + MS_ENERGY[-1].label])  # last knot: μ = 1
+    total = float(np.mean(ss + ms))
+    return float(np.mean(ms)) / total if total > 0.0 else 0.0
+
+
+def _left(p: model.Params, wo):
+    """1 − the form's single-scattering furnace with the Dirac (rendered or not: its share is not left to MS)."""
+    lit = replace(p, multiple_scattering=False, delta_transmission=True)
+    return 1.0 - closure_furnace(lambda w: _numpy_shaded(lit, input_values(lit), w, shade), wo, ENERGY_QUADRATURE,
+                                 SHARP_ALBEDO)
+
+
+def _ms_furnace(p: model.Params, wo):
+    """Albedo (N, 3) of the form's multiple-scattering closures before the energy scale."""
+    single = replace(p, multiple_scattering=False)
+    values = {**input_values(single), **_lobe_values(p)}
+    return closure_furnace(lambda w: _numpy_shaded(p, values, w, _unscaled_multiple_scattering), wo, ENERGY_QUADRATURE,
+                           SHARP_ALBEDO)
+
+
+def _numpy_shaded(p: model.Params, values: dict, wo, shade_with):
+    b = NumpyBackend(wo, values, "osl")
+    shade_with(b, p)
+    return b
 
 
 def shade(b, p: model.Params) -> None:
@@ -279,10 +374,10 @@ def shade(b, p: model.Params) -> None:
     if p.substrate is not None:
         exit_ = stack if p.substrate.type != "diffuse" else _prod(*[t["tau_exit"] for t in terms])
         shade_substrate(b, p.substrate, stack * exit_)
-    if p.delta_transmission:
+    if p.delta_transmission and p.substrate is None:  # every substrate blocks or refracts it (reference)
         b.transparent(b.scale((1.0, 1.0, 1.0), stack))
     if p.multiple_scattering:
-        _multiple_scattering(b, p, mu)
+        _multiple_scattering(_EnergyScaled(b, _energy(b, mu)), p, mu)
 
 
 def _layers(b, p: model.Params, mu, prefix: str) -> list[dict]:
@@ -309,11 +404,44 @@ def _layers(b, p: model.Params, mu, prefix: str) -> list[dict]:
 
 def _multiple_scattering(b, p: model.Params, mu) -> None:
     """Sec. 5: the network's extra single-scattering lobe (its parameters baked into the ``MS`` inputs, W1 in
-    the albedo), mapped like the layers themselves, plus the Lambert lobes W2r / π and W2t / π (exact)."""
+    the albedo), mapped like the layers themselves, plus the Lambert lobes W2r / π and W2t / π (exact). ``shade``
+    passes a backend that scales these closures by the energy scale (``_EnergyScaled``)."""
     _layers(b, p, mu, MS_PREFIX)
     b.diffuse(b.input(MS_PREFIX + "Reflection", "color"))
     if p.substrate is None:
         b.translucent(b.input(MS_PREFIX + "Transmission", "color"))
+
+
+def _unscaled_multiple_scattering(b, p: model.Params) -> None:
+    _multiple_scattering(b, p, b.cos_view())
+
+
+def _energy(b, mu):
+    """The ``MS Energy`` inputs interpolated at the view: linear in √μ between the knots of
+    ``model.energy_cosines``, the first knot's value closer to grazing (``reference.spongecake.energy_at``)."""
+    lo = math.sqrt(model.MIN_ENERGY_COS)
+    x = b.maximum((b.sqrt(mu) - lo) * ((len(MS_ENERGY) - 1) / (1.0 - lo)), 0.0)
+    total = None
+    for k, prm in enumerate(MS_ENERGY):
+        hat = b.maximum(1.0 - b.abs(x - float(k)), 0.0)
+        term = b.scale(b.input(MS_PREFIX + prm.label, "color"), hat)
+        total = term if total is None else total + term
+    return total
+
+
+class _EnergyScaled:
+    """A backend that passes everything to ``b`` but multiplies the colour of each closure by ``scale``."""
+
+    CLOSURES = ("glossy", "diffuse", "translucent")
+
+    def __init__(self, b, scale):
+        self._b, self._scale = b, scale
+
+    def __getattr__(self, name):
+        attr = getattr(self._b, name)
+        if name not in self.CLOSURES:
+            return attr
+        return lambda color, *args, **kw: attr(color * self._scale, *args, **kw)
 
 
 def _slab_transmission(b, t):

@@ -17,6 +17,15 @@ Conventions (local frame, z = macro normal; ``wi`` points to the light, ``wo`` t
   no substrate (every substrate blocks or refracts it); it is not part of ``eval`` or ``pdf``.
 * With ``multiple_scattering``, ``eval`` adds the network's two lobes (Sec. 5) and ``sample``/``pdf`` still
   sample single scattering only, as the paper does (Sec. 4.5); the sample weight uses the full f.
+* Energy (``energy_tables``; not in the paper): the network's lobes are scaled per view by
+  s(μo) = min(left(μo) / E(μo), limit), tabulated on ``ENERGY_KNOTS`` view cosines (linear in √|μo|, the least
+  over ``ENERGY_AZIMUTHS`` azimuths where a layer is oriented off the normal). left = 1 − A_ss − T_δ is what single
+  scattering and the Dirac leave (whether the Dirac is rendered or not), E the directional albedo of the network's
+  lobes: single plus multiple scattering never return more than they receive. The limit is 1 (the network's
+  energy wherever it fits in), except for stacks that conserve energy once white (``models.spongecake.
+  conserving``: no Fresnel flakes, no substrate or a diffuse one), where it moves towards left_white / E_white, the
+  scale that gives the white stack exactly its leftover, by the stack's whiteness (``bake.spongecake.
+  whiteness_of``): a white isotropic stack returns exactly what it receives at the knots. [named: ms-energy]
 * Sampling picks a lobe with P(first collision in layer k) = (1 - tau_k(wi)) prod_{j between} tau_j(wi), the
   substrate (or the Dirac) with prod_k tau_k(wi), renormalised (uniform over the continuous lobes when all
   vanish, where f = 0 anyway). ``pdf`` is the exact density of the continuous samples; a Dirac sample has
@@ -24,11 +33,14 @@ Conventions (local frame, z = macro normal; ``wi`` points to the light, ``wo`` t
 """
 from __future__ import annotations
 
+from dataclasses import replace
+from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
 
-from ..models.spongecake import Layer, Params, Substrate, params_from_dict
+from ..models.spongecake import (ENERGY_AZIMUTHS, Layer, Params, Substrate, anisotropic, conserving, energy_cosines,
+                                 params_from_dict, white)
 from . import hg, lobes, microfacet, sggx
 from .frames import as_directions, dot, spherical
 
@@ -199,11 +211,21 @@ def eval(params: Params, wi, wo):
 def eval_multiple(params: Params, wi: np.ndarray, wo: np.ndarray, prediction=None):
     """The predicted multiple-scattering part of f(wi, wo), (N, 3), no cosine. With a substrate, the layers' own
     prediction (trained without one) closes at the substrate: reflection above only (the "ms-over-substrate"
-    approximation, measured against the random walk in docs/accuracy.md). ``prediction``: the network's
-    (``bake.spongecake.predict``), computed when not given."""
+    approximation, measured against the random walk in docs/accuracy.md), scaled per view by ``energy_tables``.
+    ``prediction``: a given network's lobes (``bake.spongecake.predict_with``), unscaled; the shipped network's,
+    scaled, when not given."""
     from ..bake.spongecake import predict
 
     pred = prediction or predict(params)
+    above, below = energy_tables(params) if prediction is None else (None, None)
+    f = _network_lobes(params, pred, wi, wo)
+    if above is not None:
+        f = f * np.where((wo[:, 2] > 0)[:, None], energy_at(above, wo), energy_at(below, wo))
+    return f
+
+
+def _network_lobes(params: Params, pred, wi, wo):
+    """The network's multiple-scattering lobes as predicted, before the energy scale (``eval_multiple``)."""
     up = (wo[:, 2] > 0)[:, None]  # the viewer's side picks the prediction (module docstring)
     same = (wi[:, 2] > 0) == (wo[:, 2] > 0)
     f = np.where(up, eval(pred.lobe, wi, wo), eval(pred.lobe_below, wi, wo))
@@ -214,6 +236,69 @@ def eval_multiple(params: Params, wi: np.ndarray, wo: np.ndarray, prediction=Non
         f = f * ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
     grazing = (wi[:, 2] == 0) | (wo[:, 2] == 0)
     return np.where(grazing[:, None], 0.0, f)
+
+
+ENERGY_SAMPLES = 4096  # directions per view of the albedos behind the energy tables (``directional_albedo``)
+
+
+def energy_at(table, w):
+    """A table over ``energy_cosines`` (K, 3) at directions w (N, 3): linear in √|cos θ|, clamped at the ends."""
+    knots = np.sqrt(energy_cosines())
+    u = np.sqrt(np.abs(w[:, 2]))
+    return np.stack([np.interp(u, knots, table[:, c]) for c in range(3)], axis=1)
+
+
+def energy_tables(params: Params):
+    """The energy scale of the network's lobes (module docstring) on ``energy_cosines`` for views above and below,
+    ((K, 3), (K, 3)). The scale at a view cosine is the least over ``ENERGY_AZIMUTHS`` view azimuths where a layer is
+    oriented off the normal (one otherwise), so that no azimuth gains energy. Seen from below a stack on a substrate
+    has no multiple scattering (scale 0). Cached per stack and weights folder."""
+    from ..bake import spongecake as bake
+
+    return _energy_tables(params, str(bake.WEIGHTS))
+
+
+@lru_cache(maxsize=256)
+def _energy_tables(params: Params, weights: str):
+    from ..bake.spongecake import energy_scale, predict, white_limit, whiteness_of
+
+    mu = np.asarray(energy_cosines())
+    n_phi = ENERGY_AZIMUTHS if anisotropic(params) else 1
+    phi = np.arange(n_phi) * (2.0 * np.pi / n_phi)
+    single = replace(params, multiple_scattering=False)
+    plain = white(params) if conserving(params) else None
+    whiteness = whiteness_of(params)
+    tables = []
+    for side in (1.0, -1.0):
+        if params.substrate is not None and side < 0:
+            tables.append(np.zeros((len(mu), 3)))
+            continue
+        wo = spherical(np.repeat(side * mu, n_phi), np.tile(phi, len(mu)))
+        lobes = _lobe_albedo(params, predict(params), wo)
+        limit = 1.0
+        if plain is not None:
+            limit = white_limit(_left(plain, wo), _lobe_albedo(plain, predict(plain), wo), whiteness)
+        tables.append(energy_scale(_left(single, wo), lobes, limit).reshape(len(mu), n_phi, 3).min(axis=1))
+    return tables[0], tables[1]
+
+
+def _left(params: Params, wo):
+    """1 - A_ss - T_delta towards wo (N, 3): what single scattering and the Dirac (rendered or not) leave."""
+    through = np.exp(-_optical_depths(params, wo).sum(axis=0))[:, None] * (params.substrate is None)
+    return 1.0 - directional_albedo(params, wo, n=ENERGY_SAMPLES) - through
+
+
+def _lobe_albedo(params: Params, pred, wo):
+    """Directional albedo (N, 3) of the network's unscaled lobes towards wo (all on one side): the extra
+    single-scattering lobe's plus W2r + W2t (Lambert, exact); over a substrate reflection only."""
+    up = wo[0, 2] > 0
+    lobe = pred.lobe if up else pred.lobe_below
+    reflection, transmission = directional_albedo(lobe, wo, n=ENERGY_SAMPLES, split=True)
+    w2r = np.asarray(pred.reflection if up else pred.reflection_below)
+    w2t = np.asarray(pred.transmission if up else pred.transmission_below)
+    if params.substrate is not None:
+        return reflection + w2r
+    return reflection + transmission + w2r + w2t
 
 
 def delta_transmittance(params: Params, wi):

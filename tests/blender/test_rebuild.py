@@ -10,6 +10,7 @@ bpy = pytest.importorskip("bpy")
 from addon.bake import exr  # noqa: E402
 from addon.models import spongecake as model  # noqa: E402
 from addon.nodes import material, osl, texture_wiring  # noqa: E402
+from addon.nodes import spongecake as spongecake_nodes  # noqa: E402
 from addon.operators import bake_ops  # noqa: E402
 
 pytestmark = pytest.mark.blender
@@ -188,7 +189,9 @@ def _bake_state(mat):
 def test_baked_textures_survive_a_form_switch(baked):
     mat, names = baked
     nodes, ms = _bake_state(mat)
-    assert nodes and all(ms.values())  # every MS input is driven by a baked node
+    energy = {material._norm(spongecake_nodes.MS_PREFIX + prm.label) for prm in spongecake_nodes.MS_ENERGY}
+    assert nodes and all(feeds for name, feeds in ms.items() if name not in energy)  # every per-texel MS input is
+    assert not any(ms[name] for name in energy)  # driven by a baked node; the energy scale is the material's own
     images = {n.image.name for n in texture_wiring.baked_nodes(mat) if n.bl_idname == "ShaderNodeTexImage"}
     key = mat[material.MS_KEY]
     for form in ("osl", "nodes"):

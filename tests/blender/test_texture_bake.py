@@ -65,11 +65,17 @@ def strong_network(monkeypatch):
         weights[:] = (0.3 * top[:, rows_.ALBEDO].mean(axis=1) * (1 - np.exp(-top[:, rows_.THICKNESS])))[:, None]
         return lobes, weights
 
-    ms.predict.cache_clear()
+    _clear_caches()
     monkeypatch.setattr(ms, "predict_rows", strong)
     monkeypatch.setattr(textures, "predict_rows", strong)
     yield
+    _clear_caches()
+
+
+def _clear_caches():
+    """The network's predictions and what is cached from them (per stack and weights folder, not per stand-in)."""
     ms.predict.cache_clear()
+    mapping._ms_values.cache_clear()
 
 
 # ------------------------------------------------------------------------------------------- helpers
@@ -152,7 +158,12 @@ def test_baked_maps_load_as_non_color_and_match_the_prediction_per_source_texel(
     assert len(nodes) == len(layout)
     links = _ms_links(mat)
     assert set(links) == {material.socket_key(material.shader_node(mat), s.name)
-                          for s in mapping.sockets(p) if s.baked}
+                          for s in mapping.sockets(p) if s.per_texel}
+    own = mapping.ms_values(p)  # the energy scale is the material's own, not per texel
+    node = material.shader_node(mat)
+    for prm in mapping.MS_ENERGY:
+        value = node.inputs[material.socket_key(node, mapping.MS_PREFIX + prm.label)].default_value
+        np.testing.assert_allclose(np.asarray(value)[:3], own[mapping.MS_PREFIX + prm.label], rtol=1e-5)
     for name, channels in layout.items():
         tex = next(n for n in nodes.values() if n.label == f"Lamina bake: {name}")
         image = tex.image
@@ -185,7 +196,9 @@ def test_srgb_textures_are_linearised_like_blender():
 
 # -------------------------------------------------------------------------------------------- renders
 
-def _render_halves(param, form, folder):
+def _render_halves(param, form, folder, monkeypatch):
+    """Cycles' render of a two-valued texture and the prediction of each half: that texel's baked lobes with the
+    material's own energy scale (not baked per texel: its ``MS Energy`` inputs hold the Lamina node's)."""
     path, received = _halves(folder, param)
     mat, _ = _material(param, path, form)
     bake_ops.bake(mat)
@@ -193,15 +206,22 @@ def _render_halves(param, form, folder):
     img, _ = render_cycles(mat, spec, 32, 0, os.path.join(str(folder), f"{form}.exr"))
     halves = texture_halves(spec)
     texel = {"left": (H - 1, 0), "right": (H - 1, W - 1)}
+    node = material.shader_node(mat)
+    own = {mapping.MS_PREFIX + prm.label:
+           tuple(node.inputs[material.socket_key(node, mapping.MS_PREFIX + prm.label)].default_value)[:3]
+           for prm in mapping.MS_ENERGY}
+    monkeypatch.setattr(mapping, "energy_values", lambda p: own)
+    mapping._ms_values.cache_clear()
     predicted = {half: predicted_image(model.ID, _params({param: _texel_value(received, *texel[half])}), form, spec)
                  for half in halves}
+    mapping._ms_values.cache_clear()
     return img, halves, predicted, received
 
 
 @pytest.mark.parametrize("form", ["nodes", "osl"])
 @pytest.mark.parametrize("param", sorted(CASES))
-def test_cycles_renders_each_half_as_predicted_for_its_parameters(param, form, saved, strong_network):
-    img, halves, predicted, received = _render_halves(param, form, saved)
+def test_cycles_renders_each_half_as_predicted_for_its_parameters(param, form, saved, strong_network, monkeypatch):
+    img, halves, predicted, received = _render_halves(param, form, saved, monkeypatch)
     for half, mask in halves.items():
         pred = predicted[half]
         err = metrics.rmse(img, pred, mask) / max(pred[mask].mean(), 1e-3)
@@ -215,8 +235,8 @@ def test_cycles_renders_each_half_as_predicted_for_its_parameters(param, form, s
 
 
 @pytest.mark.parametrize("form", ["nodes", "osl"])
-def test_cycles_renders_the_shipped_networks_bake_per_half(form, saved):
-    img, halves, predicted, _ = _render_halves("albedo", form, saved)
+def test_cycles_renders_the_shipped_networks_bake_per_half(form, saved, monkeypatch):
+    img, halves, predicted, _ = _render_halves("albedo", form, saved, monkeypatch)
     for half, mask in halves.items():
         err = metrics.rmse(img, predicted[half], mask) / max(predicted[half][mask].mean(), 1e-3)
         assert err < 0.02, f"{form} {half}: {err:.4f}"
@@ -385,7 +405,7 @@ def test_the_operator_bakes_and_reports(saved, registered):
     mat, _ = _material("albedo", path)
     with bpy.context.temp_override(material=mat):
         assert bpy.ops.lamina.bake_textures() == {"FINISHED"}
-        assert len(_ms_links(mat)) == len([s for s in mapping.sockets(material.current_params(mat)[1]) if s.baked])
+        assert len(_ms_links(mat)) == len([s for s in mapping.sockets(material.current_params(mat)[1]) if s.per_texel])
         material.shader_node(mat).name = "gone"
         with pytest.raises(RuntimeError, match="has no Lamina node"):
             bpy.ops.lamina.bake_textures()

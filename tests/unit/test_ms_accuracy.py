@@ -22,10 +22,12 @@ from addon.reference import spongecake as ref
 MIN_TRAINING_CONFIGS = 100
 THRESHOLDS = {
     # Regression bounds a little above what the shipped networks measure (docs/accuracy.md), not goals.
-    # White furnace of non-absorbing stacks, SS + MS: mean and worst |1 - a|. The issue's goal (5% / 15%) is
-    # NOT met: 17% / 83% measured (SS alone: 44% / 99%).
-    "furnace_mean": 0.20,
-    "furnace_worst": 0.90,
+    # White furnace of non-absorbing stacks of 1-4 layers, SS + MS with the energy scale: mean and worst |1 - a| and
+    # the largest a. Issue 15's goal (3% / 10% / 1.005) is NOT met: 8.4% / 55% / 1.0125 measured (isotropic stacks
+    # 0.4% / 1.3%; without the scale, 1-2 layers: 17% / 83% / 1.83).
+    "furnace_mean": 0.10,
+    "furnace_worst": 0.60,
+    "furnace_max": 1.02,
     # held-out validation set: mean relative lobe error per layer count (no MS at all scores 1.0); measured
     # 66.5% (1 layer) and 61.1% (2 layers)
     "validation_mean_lobe_error_1": 0.70,
@@ -58,7 +60,7 @@ trained = pytest.mark.skipif(_placeholder(), reason="placeholder weights: the th
 def test_white_furnace_configs_are_seeded_and_non_absorbing():
     a, b = bench.white_furnace_configs(3, seed=4), bench.white_furnace_configs(3, seed=4)
     assert a == b and a != bench.white_furnace_configs(3, seed=5)
-    assert [len(c["layers"]) for c in a] == [1, 1, 1, 2, 2, 2]
+    assert [len(c["layers"]) for c in a] == [1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4]
     for c in a:
         p = model.params_from_dict(c)
         assert p.substrate is None and not p.delta_transmission and not p.multiple_scattering
@@ -68,7 +70,7 @@ def test_white_furnace_configs_are_seeded_and_non_absorbing():
 def test_white_furnace_truth_is_one_and_single_scattering_falls_short():
     sizes = bench.MsSizes(furnace_configs=2, furnace_samples=1024, furnace_paths=4000)
     rows = bench.white_furnace(sizes)
-    assert len(rows) == 4 * len(bench.FURNACE_THETAS)
+    assert len(rows) == 8 * len(bench.FURNACE_THETAS)
     truth = np.array([r["truth"] for r in rows])
     single = np.array([r["ss"] for r in rows])
     assert np.all(truth <= 1.0 + 1e-9) and np.all(truth > 0.95)  # 64 orders: little is cut off
@@ -77,6 +79,8 @@ def test_white_furnace_truth_is_one_and_single_scattering_falls_short():
     assert s["ss"]["mean_vs_1"] == pytest.approx(np.mean(np.abs(1 - single)))
     assert s["truth"]["worst_vs_1"] == pytest.approx(np.max(np.abs(1 - truth)))
     assert s["ss_ms"]["worst_vs_truth"] >= s["ss_ms"]["mean_vs_truth"] >= 0
+    cycles = np.array([r["cycles"] for r in rows])
+    assert np.all(np.isfinite(cycles)) and s["cycles"]["max"] == pytest.approx(cycles.max())
 
 
 def test_lobe_data_scores_zero_for_the_truth_and_one_for_nothing():
@@ -106,11 +110,15 @@ def test_failure_case_errors_are_measured():
 
 # ------------------------------------------------------------------------------- thresholds (trained weights)
 
+# Minutes (24 stacks with their random walks): make bench measures the same, and tests/unit/test_ms_energy.py checks
+# the energy scale's behaviour in CI time.
+@pytest.mark.slow
 @trained
 def test_white_furnace_energy_of_ss_plus_ms():
     s = bench.furnace_summary(bench.white_furnace(bench.MS_DEFAULT))["ss_ms"]
     t = thresholds()
     assert s["mean_vs_1"] <= t["furnace_mean"] and s["worst_vs_1"] <= t["furnace_worst"], s
+    assert s["max"] <= t["furnace_max"], s
 
 
 @trained

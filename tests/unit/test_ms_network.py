@@ -46,8 +46,9 @@ def test_numpy_inference_matches_torch_through_the_shipped_float32_format(n_laye
 
 @pytest.mark.parametrize("n_layers", [1, 2])
 def test_numpy_lobe_matches_the_differentiable_training_lobe(n_layers, monkeypatch, tmp_path):
-    """The loss's W1 f_ss(params') + W2 / pi (torch) and the add-on's eval_multiple (numpy) are one function for
-    the viewer above, light from either side (below the viewer sees the flipped stack's prediction)."""
+    """The loss's W1 f_ss(params') + W2 / pi (torch) and the add-on's eval_multiple (numpy) before its energy scale
+    are one function for the viewer above, light from either side (below the viewer sees the flipped stack's
+    prediction)."""
     net = _random_network(n_layers, seed=1)
     exported = train.to_mlp(net, {})
     mlp.save(tmp_path / ms.weights_path(n_layers).name, exported.weights, exported.biases, {})
@@ -62,7 +63,7 @@ def test_numpy_lobe_matches_the_differentiable_training_lobe(n_layers, monkeypat
     with torch.no_grad():
         torch_lobe = train.predicted_lobe(net32, *train.tensors(data)).numpy()
     data["ms"] = np.zeros(torch_lobe.shape)
-    np.testing.assert_allclose(validation.predicted_lobes(data), torch_lobe, rtol=1e-5, atol=1e-12)
+    np.testing.assert_allclose(validation.predicted_lobes(data, energy=False), torch_lobe, rtol=1e-5, atol=1e-12)
     mlp.load.cache_clear()
     ms.predict.cache_clear()
 
@@ -89,6 +90,9 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
     shards = sorted(data_dir.rglob("*.npz"))
     assert dataset.main(["--quick", "--out", str(data_dir), "--workers", "1"]) == 0  # resumes: nothing redone
     assert [s.stat().st_mtime_ns for s in shards] == [s.stat().st_mtime_ns for s in sorted(data_dir.rglob("*.npz"))]
+    runs = [json.loads(line) for line in (data_dir / "runs.jsonl").read_text().splitlines()]  # the run log
+    assert [(r["made"], r["cached"], r["complete"]) for r in runs] == [(len(shards), 0, True), (0, len(shards), True)]
+    assert all(json.loads(str(np.load(s)["meta"]))["seconds"] >= 0 for s in shards)
     assert train.main(["--quick", "--data", str(data_dir), "--out", str(weights), "--validation", str(data_dir),
                        "--threads", "1"]) == 0
     monkeypatch.setattr(ms, "WEIGHTS", weights)
@@ -109,9 +113,11 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("n_layers", [1, 2])
 def test_shipped_weights_meet_their_recorded_validation_error(n_layers):
+    """The manifest records the network's own error (before the energy scale of ``eval_multiple``)."""
     net = ms.network(n_layers)
     recorded = net.manifest["held_out_validation"]
-    scores = validation.lobe_errors(validation.load_shards(VALIDATION, n_layers))
+    data = validation.load_shards(VALIDATION, n_layers)
+    scores = validation.lobe_errors(data, validation.predicted_lobes(data, energy=False))
     assert scores["configs"] == recorded["configs"]
     for key in ("mean_relative_lobe_error", "worst_relative_lobe_error", "mean_relative_energy_error"):
         assert scores[key] == pytest.approx(recorded[key], rel=1e-3), key

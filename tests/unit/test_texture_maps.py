@@ -66,17 +66,19 @@ def test_every_texel_is_the_prediction_for_that_texels_parameters():
     assert not np.allclose(reflection[0], reflection[-1]) and not np.allclose(reflection[:, 0], reflection[:, -1])
 
 
-def test_the_layout_feeds_every_ms_input_of_the_shader_once():
+def test_the_layout_feeds_every_per_texel_ms_input_of_the_shader_once():
+    """Every baked input but the energy scale (the material's own, not per texel) is fed by a map, once."""
     for data in (STACK, {**STACK, "substrate": {"type": "diffuse"}},
                  {"layers": [{"type": "fiber"}], "multiple_scattering": True}):
         p = _params(data)
         layout = textures.map_layout(p)
         fed = [(e[0], e[1]) for channels in layout.values() for e in channels if e]
         assert len(fed) == len(set(fed))
-        widths = {s.name: 1 if s.kind == "float" else 3 for s in mapping.sockets(p) if s.baked}
+        widths = {s.name: 1 if s.kind == "float" else 3 for s in mapping.sockets(p) if s.per_texel}
         assert sorted(fed) == sorted((name, c) for name, n in widths.items() for c in range(n))
         assert all(ch[0] is not None for ch in layout.values())
     assert "MS Transmission" not in textures.map_layout(_params({**STACK, "substrate": {"type": "diffuse"}}))
+    assert not any("Energy" in name for name in textures.map_layout(_params(STACK)))
 
 
 def test_a_grey_albedo_texture_and_hg_roughness_are_accepted():

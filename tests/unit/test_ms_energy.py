@@ -1,0 +1,151 @@
+"""SpongeCake multiple scattering's energy scale (issue 15, part 1): ``reference.spongecake.energy_tables`` and the
+``MS Energy`` inputs of the Cycles forms (``nodes.spongecake.energy_values``).
+
+White furnaces are estimated with the reference's own stratified estimator (``furnace_albedo``, 4096 directions per
+view: about 0.3 % noise) and with the numpy prediction of what Cycles renders; every stack here was checked to
+gain or lose energy without the scale (``UNSCALED_GLOW``), so the tests fail if the scale is left out."""
+import numpy as np
+import pytest
+
+from addon.bake import spongecake as bake
+from addon.models import spongecake as model
+from addon.nodes import _backend
+from addon.nodes.closures_np import SHARP_ALBEDO
+from addon.nodes.expr import closure_furnace
+from addon.nodes import spongecake as mapping
+from addon.reference import spongecake as ref
+from addon.reference.frames import spherical
+
+WHITE = {
+    "flakes over a medium (glows 1.5x unscaled)": [
+        {"type": "surface", "roughness": 0.02, "thickness": 0.5, "albedo": [1, 1, 1]},
+        {"type": "hg", "roughness": 0.5, "thickness": 2.0, "albedo": [1, 1, 1]}],
+    "fibers along the normal": [
+        {"type": "fiber", "roughness": 0.3, "thickness": 1.0, "albedo": [1, 1, 1], "orientation": [0, 0, 1]}],
+    "back-scattering medium": [{"type": "hg", "roughness": -0.5, "thickness": 5.0, "albedo": [1, 1, 1]}],
+    "four layers": [
+        {"type": "surface", "roughness": 0.3, "thickness": 0.2, "albedo": [1, 1, 1]},
+        {"type": "hg", "roughness": 0.3, "thickness": 0.5, "albedo": [1, 1, 1]},
+        {"type": "surface", "roughness": 0.6, "thickness": 1.0, "albedo": [1, 1, 1]},
+        {"type": "hg", "roughness": -0.2, "thickness": 2.0, "albedo": [1, 1, 1]}],
+}
+OTHERS = {
+    "absorbing flakes over a medium": {"layers": [
+        {"type": "surface", "roughness": 0.02, "thickness": 0.5, "albedo": [0.9, 0.6, 0.3]},
+        {"type": "hg", "roughness": 0.5, "thickness": 2.0, "albedo": [0.95, 0.95, 0.8]}]},
+    "fresnel flakes": {"layers": [
+        {"type": "surface", "roughness": 0.05, "thickness": 3.0, "albedo": [1, 1, 1], "f0": [0.3, 0.3, 0.3]}]},
+    "tilted flakes over in-plane fibers": {"layers": [
+        {"type": "surface", "roughness": 0.2, "thickness": 0.5, "albedo": [1, 1, 1], "orientation": [0.6, 0, 0.8]},
+        {"type": "fiber", "roughness": 0.3, "thickness": 2.0, "albedo": [1, 1, 1], "orientation": [0, 1, 0]}]},
+    "white flakes on a white diffuse substrate": {"layers": [
+        {"type": "surface", "roughness": 0.3, "thickness": 8.0, "albedo": [1, 1, 1]}],
+        "substrate": {"type": "diffuse", "albedo": [1, 1, 1]}},
+    "medium on a conductor": {"layers": [{"type": "hg", "roughness": -0.5, "thickness": 5.0, "albedo": [1, 1, 1]}],
+                              "substrate": {"type": "conductor"}},
+}
+
+
+def _params(data: dict) -> model.Params:
+    return model.params_from_dict({**data, "delta_transmission": "substrate" not in data, "multiple_scattering": True})
+
+
+def _views(n: int, seed: int, sides=(1.0, -1.0)) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    mu = np.linspace(np.cos(np.radians(85.0)), 1.0, n)
+    return np.concatenate([spherical(s * mu, rng.uniform(0.0, 2.0 * np.pi, n)) for s in sides])
+
+
+@pytest.mark.parametrize("name", list(WHITE))
+def test_white_isotropic_stacks_return_what_they_receive(name):
+    p = _params({"layers": WHITE[name]})
+    a = ref.furnace_albedo(p, _views(12, 1), seed=3)
+    # exact at the knots up to the noise of the tables' and this estimate's albedos (4096 directions each, larger
+    # for deep stacks); between them the interpolation
+    assert np.mean(np.abs(a - 1.0)) <= 0.012, a[:, 0]
+    assert a.max() <= 1.045, a[:, 0]
+
+
+def test_the_scale_is_what_makes_it_so():
+    """Without the scale the first white stack glows (the network's energy alone), so the test above can fail."""
+    p = _params({"layers": WHITE["flakes over a medium (glows 1.5x unscaled)"]})
+    wo = _views(6, 2)
+    unscaled = ref.furnace_albedo(model.white(p), wo) + np.concatenate(
+        [ref._lobe_albedo(p, bake.predict(p), wo[:6]), ref._lobe_albedo(p, bake.predict(p), wo[6:])])
+    assert unscaled.max() > 1.3
+
+
+@pytest.mark.parametrize("name", list(OTHERS))
+def test_no_stack_gains_energy(name):
+    p = _params(OTHERS[name])
+    sides = (1.0,) if p.substrate is not None else (1.0, -1.0)
+    a = ref.furnace_albedo(p, _views(10, 4, sides), seed=5)
+    assert np.all(np.isfinite(a)) and a.min() >= 0.0
+    assert a.max() <= 1.02, a.max(axis=1)
+
+
+def test_a_white_stack_on_a_white_diffuse_substrate_is_exact():
+    p = _params(OTHERS["white flakes on a white diffuse substrate"])
+    a = ref.furnace_albedo(p, _views(10, 6, (1.0,)), seed=7)
+    assert np.mean(np.abs(a - 1.0)) <= 0.008, a[:, 0]
+
+
+def _form_furnace(p, form, wo):
+    """The form's white furnace with GGX lobes integrated by their own quadrature (near-mirror flakes)."""
+    return closure_furnace(lambda w: _backend("spongecake", p, form, w), wo, quadratures=SHARP_ALBEDO)
+
+
+@pytest.mark.parametrize("form", ["osl", "nodes"])
+@pytest.mark.parametrize("name", ["flakes over a medium (glows 1.5x unscaled)", "four layers"])
+def test_cycles_forms_white_furnace_is_one(form, name):
+    """In the forms the scale is built on what the form's own single scattering leaves, so the rendered white
+    furnace is 1 whatever the single-scattering mapping's error (views above: the forms' MS is light from above)."""
+    p = _params({"layers": WHITE[name]})
+    a = _form_furnace(p, form, _views(9, 8, (1.0,)))
+    assert np.mean(np.abs(a - 1.0)) <= 0.008, a[:, 0]
+    assert a.max() <= 1.02
+
+
+@pytest.mark.parametrize("name", list(OTHERS))
+def test_cycles_forms_never_gain_energy(name):
+    p = _params(OTHERS[name])
+    a = _form_furnace(p, "osl", _views(9, 9, (1.0,)))
+    assert np.all(np.isfinite(a)) and a.min() >= 0.0
+    assert a.max() <= 1.02, a.max(axis=1)
+
+
+def test_energy_inputs_are_the_forms_scale():
+    p = _params({"layers": WHITE["back-scattering medium"]})
+    values = mapping.ms_values(p)
+    energy = [values[mapping.MS_PREFIX + prm.label] for prm in mapping.MS_ENERGY]
+    assert len(energy) == model.ENERGY_KNOTS
+    assert np.all(np.isfinite(energy)) and np.min(energy) >= 0.0
+    assert np.ptp(energy) > 0.01  # a view-dependent scale, not a constant
+
+
+def test_energy_scale_limits():
+    lobes = np.array([[0.0, 0.2, 0.5]])
+    left = np.array([[0.3, -0.1, 0.25]])
+    np.testing.assert_allclose(bake.energy_scale(left, lobes), [[1.0, 0.0, 0.5]])
+    np.testing.assert_allclose(bake.energy_scale(np.array([[0.9]]), np.array([[0.3]]), 2.0), [[2.0]])
+    np.testing.assert_allclose(bake.white_limit(np.array([0.6]), np.array([0.3]), np.array([1.0])), [2.0])
+    np.testing.assert_allclose(bake.white_limit(np.array([0.6]), np.array([0.3]), np.array([0.0])), [1.0])
+    dark = model.params_from_dict({"layers": [{"type": "hg", "albedo": [1.0, 0.8, 0.0]}]})
+    np.testing.assert_allclose(bake.whiteness_of(dark), [1.0, 0.8 ** bake.WHITENESS_POWER, 0.0])
+
+
+@pytest.mark.parametrize("layer", [
+    {"type": "surface", "roughness": 1e-4, "thickness": 0.0},
+    {"type": "surface", "roughness": 1.0, "thickness": 1e4},
+    {"type": "hg", "roughness": 0.999, "thickness": 1.0},
+    {"type": "hg", "roughness": -0.999, "thickness": 1.0},
+    {"type": "fiber", "roughness": 1e-4, "thickness": 1e4, "orientation": [1, 0, 0]},
+])
+def test_extremes_give_finite_non_negative_scales(layer):
+    p = _params({"layers": [{"albedo": [1, 1, 1], **layer}]})
+    above, below = ref.energy_tables(p)
+    assert np.all(np.isfinite(above)) and np.all(np.isfinite(below))
+    assert above.min() >= 0.0 and below.min() >= 0.0
+    values = mapping.ms_values(p)
+    energy = np.array([values[mapping.MS_PREFIX + prm.label] for prm in mapping.MS_ENERGY])
+    assert np.all(np.isfinite(energy)) and energy.min() >= 0.0
