@@ -25,7 +25,9 @@ Conventions (local frame, z = macro normal; ``wi`` points to the light, ``wo`` t
   energy wherever it fits in), except for stacks that conserve energy once white (``models.spongecake.
   conserving``: no Fresnel flakes, no substrate or a diffuse one), where it moves towards left_white / E_white, the
   scale that gives the white stack exactly its leftover, by the stack's whiteness (``bake.spongecake.
-  whiteness_of``): a white isotropic stack returns exactly what it receives at the knots. [named: ms-energy]
+  whiteness_of``): a white isotropic stack returns exactly what it receives at the knots. The scale follows the
+  view alone, as a Cycles closure weight does, so the scaled lobes are reciprocal only where it is the same at
+  both directions. [named: ms-energy]
 * Sampling picks a lobe with P(first collision in layer k) = (1 - tau_k(wi)) prod_{j between} tau_j(wi), the
   substrate (or the Dirac) with prod_k tau_k(wi), renormalised (uniform over the continuous lobes when all
   vanish, where f = 0 anyway). ``pdf`` is the exact density of the continuous samples; a Dirac sample has
