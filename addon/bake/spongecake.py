@@ -248,7 +248,7 @@ def energy_scale(left, lobes, limit=1.0):
     """Multiple scattering's energy scale (..., 3) from what single scattering and the Dirac leave of the stack
     (``left``) and the albedo of the network's lobes (``lobes``): left / lobes, so that single plus multiple
     scattering never return more than they receive, at most ``limit`` (1: the network's lobes as predicted wherever
-    they fit in; ``white_scale`` for stacks that conserve energy once white)."""
+    they fit in; ``white_limit`` for stacks that conserve energy once white)."""
     share = np.where(lobes > 1e-9, np.maximum(left, 0.0) / np.maximum(lobes, 1e-9), np.inf)
     return np.minimum(share, limit)
 
