@@ -318,18 +318,9 @@ def energy_values(p: model.Params) -> dict:
     what Cycles renders (its numpy prediction, OSL form): what the form's single scattering and Dirac leave, over
     the albedo of its multiple-scattering closures, so that the rendered furnace stays at most 1 (and is 1 for a
     white isotropic stack at the knots) whatever the single-scattering mapping's error."""
-    from ..bake.spongecake import energy_scale, white_limit, whiteness_of
+    from ..bake.spongecake import energy_table
 
-    mu = np.asarray(model.energy_cosines())
-    n_phi = model.ENERGY_AZIMUTHS if model.anisotropic(p) else 1
-    phi = np.tile(np.arange(n_phi) * (2.0 * math.pi / n_phi), len(mu))
-    sin = np.sqrt(1.0 - np.repeat(mu, n_phi) ** 2)
-    wo = np.stack([sin * np.cos(phi), sin * np.sin(phi), np.repeat(mu, n_phi)], axis=1)
-    limit = 1.0
-    if model.conserving(p):
-        plain = model.white(p)
-        limit = white_limit(_left(plain, wo), _ms_furnace(plain, wo), whiteness_of(p))
-    scale = energy_scale(_left(p, wo), _ms_furnace(p, wo), limit).reshape(len(mu), n_phi, 3).min(axis=1)
+    scale = energy_table(p, _left, _ms_furnace)
     return {MS_PREFIX + prm.label: tuple(float(v) for v in row) for prm, row in zip(MS_ENERGY, scale)}
 
 

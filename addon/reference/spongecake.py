@@ -41,8 +41,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..models.spongecake import (ENERGY_AZIMUTHS, Layer, Params, Substrate, anisotropic, conserving, energy_cosines,
-                                 params_from_dict, white)
+from ..models.spongecake import Layer, Params, Substrate, energy_cosines, params_from_dict
 from . import hg, lobes, microfacet, sggx
 from .frames import as_directions, dot, spherical
 
@@ -262,26 +261,17 @@ def energy_tables(params: Params):
 
 @lru_cache(maxsize=256)
 def _energy_tables(params: Params, weights: str):
-    from ..bake.spongecake import energy_scale, predict, white_limit, whiteness_of
+    from ..bake.spongecake import energy_table, predict
 
-    mu = np.asarray(energy_cosines())
-    n_phi = ENERGY_AZIMUTHS if anisotropic(params) else 1
-    phi = np.arange(n_phi) * (2.0 * np.pi / n_phi)
-    single = replace(params, multiple_scattering=False)
-    plain = white(params) if conserving(params) else None
-    whiteness = whiteness_of(params)
-    tables = []
-    for side in (1.0, -1.0):
-        if params.substrate is not None and side < 0:
-            tables.append(np.zeros((len(mu), 3)))
-            continue
-        wo = spherical(np.repeat(side * mu, n_phi), np.tile(phi, len(mu)))
-        lobes = _lobe_albedo(params, predict(params), wo)
-        limit = 1.0
-        if plain is not None:
-            limit = white_limit(_left(plain, wo), _lobe_albedo(plain, predict(plain), wo), whiteness)
-        tables.append(energy_scale(_left(single, wo), lobes, limit).reshape(len(mu), n_phi, 3).min(axis=1))
-    return tables[0], tables[1]
+    def left_of(stack, wo):
+        return _left(replace(stack, multiple_scattering=False), wo)
+
+    def lobes_of(stack, wo):
+        return _lobe_albedo(stack, predict(stack), wo)
+
+    above = energy_table(params, left_of, lobes_of)
+    below = np.zeros_like(above) if params.substrate is not None else energy_table(params, left_of, lobes_of, -1.0)
+    return above, below
 
 
 def _left(params: Params, wo):
