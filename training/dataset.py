@@ -244,13 +244,19 @@ def main(argv=None) -> int:
                 run["cached" if name.endswith("(cached)") else "made"] += 1
                 print(f"[{done}/{len(jobs)}] {name}  {time.time() - start:.0f} s", flush=True)
     finally:
-        log_run(a.out, {**run, "seconds": round(time.time() - start), "complete": run["made"] + run["cached"] == len(jobs)})
+        log_run(a.out, {**run, "seconds": round(time.time() - start), "complete": run["made"] + run["cached"] == len(jobs),
+                        "megabytes": round(shard_bytes(a.out, a.layers) / 1e6, 1)})
     return 0
+
+
+def shard_bytes(out: Path, layers) -> int:
+    """The size on disk of the shards of these layer counts in ``out``."""
+    return sum(f.stat().st_size for n in layers for f in (Path(out) / f"layers{n}").glob("*.npz"))
 
 
 def log_run(out: Path, run: dict) -> None:
     """One line per run (also an interrupted one) in ``runs.jsonl`` beside the shards: what was asked, what was
-    made, how long it took."""
+    made, how long it took, the shards' size on disk afterwards (``megabytes``)."""
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "runs.jsonl", "a") as f:
         f.write(json.dumps(run) + "\n")

@@ -38,7 +38,8 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
 * delta transmission: transparent × ∏ τ_j(ωo) — exact (ωi = −ωo and σ is symmetric); none over a substrate.
 * multiple scattering (Sec. 5): the network's lobe mapped like the layers, plus Lambert lobes, all scaled per view
   by the baked ``MS Energy`` inputs: the reference's energy scale built on this form's own numpy prediction
-  (``energy_values``), interpolated on the view like ``reference.spongecake.energy_at``.
+  (``energy_values``), interpolated on the view like ``reference.spongecake.energy_at``; a texture-driven bake
+  keeps the material's own scale for every texel. [approx: ms-energy]
 
 The node-group form also evaluates Schlick's F at h = flake normal [approx: schlick-at-view];
 the OSL form evaluates it per microfacet (generalized_schlick_bsdf).
@@ -101,6 +102,9 @@ APPROXIMATIONS = {
                                     "the reference's half-space (Cycles evaluates the adjoint BSDF)",
                                     {**_one(type="surface", roughness=0.3, thickness=0.3),
                                      "substrate": {"type": "dielectric", "roughness": 0.3, "ior": 1.5}}),
+    "ms-energy": ("multiple scattering's energy scale on the form's own single scattering (not the reference's), "
+                  "on 8 view cosines (least over view azimuths); one per material in texture-driven bakes",
+                  {**_one(type="surface", roughness=0.5, thickness=1.0), "multiple_scattering": True}),
     "schlick-at-view": ("Schlick F at h = flake normal, not per microfacet (node group reflection; both forms' "
                         "transmission)",
                         _one(type="surface", roughness=0.3, thickness=1e4, f0=[0.2, 0.2, 0.2])),
@@ -143,6 +147,8 @@ def approximations_used(p: model.Params) -> list[str]:
             used.add("dielectric-substrate-adjoint")
     if len(p.layers) > 1:
         used.add("mirror-attenuation")
+    if p.multiple_scattering:
+        used.add("ms-energy")
     return [name for name in APPROXIMATIONS if name in used]
 
 

@@ -267,7 +267,7 @@ def _energy_tables(params: Params, weights: str):
         return _left(replace(stack, multiple_scattering=False), wo)
 
     def lobes_of(stack, wo):
-        return _lobe_albedo(stack, predict(stack), wo)
+        return network_albedo(stack, predict(stack), wo)
 
     above = energy_table(params, left_of, lobes_of)
     below = np.zeros_like(above) if params.substrate is not None else energy_table(params, left_of, lobes_of, -1.0)
@@ -280,9 +280,10 @@ def _left(params: Params, wo):
     return 1.0 - directional_albedo(params, wo, n=ENERGY_SAMPLES) - through
 
 
-def _lobe_albedo(params: Params, pred, wo):
-    """Directional albedo (N, 3) of the network's unscaled lobes towards wo (all on one side): the extra
-    single-scattering lobe's plus W2r + W2t (Lambert, exact); over a substrate reflection only."""
+def network_albedo(params: Params, pred, wo):
+    """Directional albedo (N, 3) of the network's unscaled lobes ``pred`` (``bake.spongecake.predict``) towards wo
+    (all on one side): the extra single-scattering lobe's plus W2r + W2t (Lambert, exact); over a substrate
+    reflection only."""
     up = wo[0, 2] > 0
     lobe = pred.lobe if up else pred.lobe_below
     reflection, transmission = directional_albedo(lobe, wo, n=ENERGY_SAMPLES, split=True)

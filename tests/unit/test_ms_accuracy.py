@@ -81,6 +81,8 @@ def test_white_furnace_truth_is_one_and_single_scattering_falls_short():
     assert s["ss_ms"]["worst_vs_truth"] >= s["ss_ms"]["mean_vs_truth"] >= 0
     cycles = np.array([r["cycles"] for r in rows])
     assert np.all(np.isfinite(cycles)) and s["cycles"]["max"] == pytest.approx(cycles.max())
+    network = np.array([r["network"] for r in rows])  # SS + the network's lobes before the energy scale
+    assert np.all(network >= single - 1e-12) and s["network"]["max"] == pytest.approx(network.max())
 
 
 def test_lobe_data_scores_zero_for_the_truth_and_one_for_nothing():

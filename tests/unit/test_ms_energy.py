@@ -71,7 +71,7 @@ def test_the_scale_is_what_makes_it_so():
     p = _params({"layers": WHITE["flakes over a medium (glows 1.5x unscaled)"]})
     wo = _views(6, 2)
     unscaled = ref.furnace_albedo(model.white(p), wo) + np.concatenate(
-        [ref._lobe_albedo(p, bake.predict(p), wo[:6]), ref._lobe_albedo(p, bake.predict(p), wo[6:])])
+        [ref.network_albedo(p, bake.predict(p), wo[:6]), ref.network_albedo(p, bake.predict(p), wo[6:])])
     assert unscaled.max() > 1.3
 
 

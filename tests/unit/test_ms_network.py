@@ -92,6 +92,7 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
     assert [s.stat().st_mtime_ns for s in shards] == [s.stat().st_mtime_ns for s in sorted(data_dir.rglob("*.npz"))]
     runs = [json.loads(line) for line in (data_dir / "runs.jsonl").read_text().splitlines()]  # the run log
     assert [(r["made"], r["cached"], r["complete"]) for r in runs] == [(len(shards), 0, True), (0, len(shards), True)]
+    assert runs[0]["megabytes"] == runs[1]["megabytes"] == round(sum(s.stat().st_size for s in shards) / 1e6, 1)
     assert all(json.loads(str(np.load(s)["meta"]))["seconds"] >= 0 for s in shards)
     assert train.main(["--quick", "--data", str(data_dir), "--out", str(weights), "--validation", str(data_dir),
                        "--threads", "1"]) == 0
