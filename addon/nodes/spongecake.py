@@ -415,14 +415,15 @@ def _unscaled_multiple_scattering(b, p: model.Params) -> None:
 
 def _energy(b, mu):
     """The ``MS Energy`` inputs interpolated at the view: linear in √μ between the knots of
-    ``model.energy_cosines``, the first knot's value closer to grazing (``reference.spongecake.energy_at``)."""
+    ``model.energy_cosines``, the first knot's value closer to grazing (``reference.spongecake.energy_at``), as a
+    chain of clamped mixes (knot k takes over from k − 1 as x = (√μ − √μ₀) / step passes k − 1 .. k)."""
     lo = math.sqrt(model.MIN_ENERGY_COS)
-    x = b.maximum((b.sqrt(mu) - lo) * ((len(MS_ENERGY) - 1) / (1.0 - lo)), 0.0)
-    total = None
-    for k, prm in enumerate(MS_ENERGY):
-        hat = b.maximum(1.0 - b.abs(x - float(k)), 0.0)
-        term = b.scale(b.input(MS_PREFIX + prm.label, "color"), hat)
-        total = term if total is None else total + term
+    per_step = (len(MS_ENERGY) - 1) / (1.0 - lo)
+    root = b.sqrt(mu)
+    total = b.input(MS_PREFIX + MS_ENERGY[0].label, "color")
+    for k, prm in enumerate(MS_ENERGY[1:], 1):
+        t = b.multiply_add(root, per_step, -(lo * per_step + k - 1))
+        total = b.mix_clamped(total, b.input(MS_PREFIX + prm.label, "color"), t)
     return total
 
 
