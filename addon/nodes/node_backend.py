@@ -75,6 +75,7 @@ class NodeBackend:
         self._shader = None
         self._geometry = None
         self._frame = None
+        self._made: dict[tuple, NodeValue] = {}  # pure math nodes by operation and inputs (``_pure``)
 
     # -- layout
     def _node(self, bl_idname: str, depth: int, **props):
@@ -168,16 +169,21 @@ class NodeBackend:
         return self._math(op, a, b)
 
     def _math(self, op: str, *args):
-        node = self._node("ShaderNodeMath", _depth(*args), operation=op)
-        for value, socket in zip(args, node.inputs):
-            self._link_or_set(value, socket)
-        return NodeValue(self, node.outputs[0], "float", _depth(*args))
+        return self._pure("ShaderNodeMath", op, args, 0, "float")
 
     def _vector(self, op: str, *args, out: str = "Vector"):
-        node = self._node("ShaderNodeVectorMath", _depth(*args), operation=op)
-        for value, socket in zip(args, node.inputs):
-            self._link_or_set(value, socket)
-        return NodeValue(self, node.outputs[out], "float" if out == "Value" else "color", _depth(*args))
+        return self._pure("ShaderNodeVectorMath", op, args, out, "float" if out == "Value" else "color")
+
+    def _pure(self, bl_idname: str, op: str, args, out, kind: str) -> NodeValue:
+        """A Math or Vector Math node of ``op`` on ``args``, made once per tree: the same operation on the same
+        sockets and constants reuses the node that computes it (Cycles' SVM evaluates every node)."""
+        key = (bl_idname, op, out, tuple(_identity(a) for a in args))
+        if key not in self._made:
+            node = self._node(bl_idname, _depth(*args), operation=op)
+            for value, socket in zip(args, node.inputs):
+                self._link_or_set(value, socket)
+            self._made[key] = NodeValue(self, node.outputs[out], kind, _depth(*args))
+        return self._made[key]
 
     def _per_channel(self, fn, x):
         """``fn`` of a float, or of each channel of a colour (Separate XYZ, three Math nodes, Combine XYZ)."""
@@ -429,6 +435,15 @@ class NodeBackend:
     def dielectric(self, color, alpha, ior):
         self._closure("ShaderNodeBsdfGlass", {"Color": color, "Roughness": self._roughness(alpha), "IOR": ior},
                       distribution="GGX")
+
+
+def _identity(v):
+    """What an input of a pure node is: the socket it is linked from, or its constant value."""
+    if isinstance(v, NodeValue):
+        return ("socket", v.socket.as_pointer())
+    if isinstance(v, (tuple, list)):
+        return tuple(float(x) for x in v)
+    return float(v)
 
 
 def _as_color(v):
