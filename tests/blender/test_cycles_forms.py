@@ -159,3 +159,22 @@ def test_saved_blend_renders_the_same_without_lamina(form, model_id, name, tmp_p
     a, b = renders_with_and_without_lamina(blend, f"Lamina {name}", tmp_path)
     assert a.mean() > 1e-3
     np.testing.assert_array_equal(a, b)
+
+
+def test_a_node_group_computes_each_pure_operation_once():
+    """The same Math / Vector Math operation on the same inputs is one node (Cycles' SVM evaluates every node), and
+    a different operand is a node of its own."""
+    import bpy
+    from addon.nodes.node_backend import NodeBackend
+
+    tree = bpy.data.node_groups.new("lamina cse test", "ShaderNodeTree")
+    try:
+        b = NodeBackend(tree, tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput"))
+        mu = b.cos_view()
+        once = b.sqrt(mu) * 2.0
+        made = len(tree.nodes)
+        again = b.sqrt(mu) * 2.0
+        assert again.socket == once.socket and len(tree.nodes) == made
+        assert (b.sqrt(mu) * 3.0).socket != once.socket and len(tree.nodes) == made + 1
+    finally:
+        bpy.data.node_groups.remove(tree)
