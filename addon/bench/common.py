@@ -140,7 +140,7 @@ def _goal(scene: str, mean: float, *errors) -> str:
 def _closures(model_id: str, p, form: str, fit) -> int:
     from ..nodes import _backend
 
-    return len(_backend(model_id, p, form, np.array([[0.0, 0.0, 1.0]]), fit).closures)
+    return _backend(model_id, p, form, np.array([[0.0, 0.0, 1.0]]), fit).closure_count()
 
 
 @contextlib.contextmanager

@@ -41,6 +41,9 @@ BULK_INPUT = "Bulk"
 # --------------------------------------------------------------------------------------------- numpy
 
 
+LAMBERT_CLOSURES = ("diffuse", "translucent", "transparent")  # closures without parameters (on the normal)
+
+
 class NumpyBackend(NumpyMath):
     """Evaluate a mapping in float64 for N view directions ``wo`` (local frame, z = normal).
 
@@ -150,6 +153,12 @@ class NumpyBackend(NumpyMath):
 
     def transparent(self, color):
         self._add("transparent", color)
+
+    def closure_count(self) -> int:
+        """How many closures the node group and OSL forms make of those recorded: the ones without parameters are
+        summed into one per kind (``NodeBackend._lambert``)."""
+        lambert = [kind for kind, _, _ in self.closures if kind in LAMBERT_CLOSURES]
+        return len(self.closures) - len(lambert) + len(set(lambert))
 
     def _grey(self, color, cap: float):
         """What a node group renders of a closure it weighs in grey through Mix Shaders: the channels' mean, capped."""
@@ -305,6 +314,7 @@ class OslBackend:
         self.params = params  # (osl name, kind, default)
         self.lines: list[str] = []
         self.closures: list[str] = []
+        self.lamberts: dict[str, list[str]] = {}  # closure call -> the colours summed into it (``_lambert``)
         self._count = 0
 
     def input(self, name: str, kind: str):
@@ -448,13 +458,17 @@ class OslBackend:
                            f'{_osl(eta).code}, {_osl(k).code}, "ggx")')
 
     def diffuse(self, color):
-        self._closure(color, "diffuse(N)")
+        self._lambert("diffuse(N)", color)
 
     def translucent(self, color):
-        self._closure(color, "translucent(N)")
+        self._lambert("translucent(N)", color)
 
     def transparent(self, color):
-        self._closure(color, "transparent()")
+        self._lambert("transparent()", color)
+
+    def _lambert(self, call: str, color):
+        """``NodeBackend._lambert``: closures without parameters summed by colour, one call each."""
+        self.lamberts.setdefault(call, []).append(_osl(color).code)
 
     def conductor(self, color, alpha, eta, k):
         a = _osl(alpha).code
@@ -481,7 +495,8 @@ class OslBackend:
         params = ",\n    ".join(f"{_osl_type(kind)} {osl_identifier(name)} = {_osl_default(kind, d)}"
                                  for name, kind, d in self.params)
         body = "\n    ".join(self.lines)
-        bsdf = " +\n        ".join(self.closures) or "0"
+        lamberts = [f"({' + '.join(colors)}) * {call}" for call, colors in self.lamberts.items()]
+        bsdf = " +\n        ".join(self.closures + lamberts) or "0"
         return (f"{header}\n#include \"stdcycles.h\"\n\n"
                 f"shader {shader_name}(\n    {params},\n    vector {TANGENT_INPUT} = vector(0),\n"
                 f"    output closure color BSDF = 0)\n{{\n"

@@ -76,6 +76,7 @@ class NodeBackend:
         self._geometry = None
         self._frame = None
         self._made: dict[tuple, NodeValue] = {}  # pure math nodes by operation and inputs (``_pure``)
+        self._lamberts: dict[str, object] = {}  # summed colours of closures without parameters (``_lambert``)
 
     # -- layout
     def _node(self, bl_idname: str, depth: int, **props):
@@ -319,6 +320,9 @@ class NodeBackend:
         self._add(mix.outputs[0], depth)
 
     def finish(self):
+        for bl_idname, color in self._lamberts.items():
+            self._closure(bl_idname, {"Color": color})
+        self._lamberts.clear()
         if self._shader is not None:
             self.group_output.location = ((self._shader[1] + 1) * COLUMN, 0)
             self.links.new(self._shader[0], self.group_output.inputs["BSDF"])
@@ -364,13 +368,19 @@ class NodeBackend:
         self._add(mix.outputs[0], depth + 1)
 
     def diffuse(self, color):
-        self._closure("ShaderNodeBsdfDiffuse", {"Color": color})
+        self._lambert("ShaderNodeBsdfDiffuse", color)
 
     def translucent(self, color):
-        self._closure("ShaderNodeBsdfTranslucent", {"Color": color})
+        self._lambert("ShaderNodeBsdfTranslucent", color)
 
     def transparent(self, color):
-        self._closure("ShaderNodeBsdfTransparent", {"Color": color})
+        self._lambert("ShaderNodeBsdfTransparent", color)
+
+    def _lambert(self, bl_idname: str, color):
+        """Closures without parameters (all on the shading normal) are summed by colour and made once, in
+        ``finish``: the same light for fewer closures to evaluate."""
+        previous = self._lamberts.get(bl_idname)
+        self._lamberts[bl_idname] = color if previous is None else self.binary("ADD", previous, color)
 
     def conductor(self, color, alpha, eta, k):
         """Metallic BSDF with the physical conductor Fresnel (4.3+), whose colour inputs are then unused. 4.2 has no
