@@ -11,7 +11,7 @@ DATA ?= $(HOME)/.cache/lamina/spongecake-ms
 # Neural participating media: tables of double and multiple scattering per material (resumable; docs/training.md).
 MEDIUM_DATA ?= $(HOME)/.cache/lamina/neural-medium
 
-.PHONY: venv test test-5.0 test-4.2 test-all demo bench assets extension dataset train validation-set medium-dataset medium-networks clean
+.PHONY: venv test test-5.0 test-4.2 test-all demo bench assets extension dataset train train-1 train-2 validation-set medium-dataset medium-networks clean
 
 venv: $(VENV)/.stamp
 
@@ -52,8 +52,13 @@ bench: venv
 dataset: venv
 	$(PY) -m training.dataset --out $(DATA)
 
+# The two networks side by side, one core and TRAIN_MINUTES each (how the shipped ones were trained).
+TRAIN_MINUTES ?= 30
 train: venv
-	$(PY) -m training.train --data $(DATA) --out addon/bake/weights
+	$(MAKE) --no-print-directory -j2 train-1 train-2
+
+train-1 train-2: venv
+	$(PY) -m training.train --data $(DATA) --layers $(subst train-,,$@) --threads 1 --minutes $(TRAIN_MINUTES) --out addon/bake/weights
 
 # The neural_medium tables: 56 materials (7 albedos x 8 g), about an hour on 2 cores, resumable; and 4 materials
 # between the grid's albedos, only for evaluating the networks off the grid.

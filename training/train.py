@@ -10,7 +10,7 @@ loss kept, mini-batches of 32 configurations (every direction pair of a
 configuration in the same batch). 10% of the configurations are held out for validation; the shipped,
 independently seeded validation set (tests/data) is scored at export and its errors go into the manifest.
 
-    python -m training.train --data ~/.cache/lamina/spongecake-ms --layers 1 2 --minutes 15 --out addon/bake/weights
+    python -m training.train --data ~/.cache/lamina/spongecake-ms --layers 1 --threads 1 --minutes 30 --out addon/bake/weights
     python -m training.train --data /tmp/quick --quick --out /tmp/weights             # seconds, for tests
 """
 from __future__ import annotations
@@ -34,7 +34,7 @@ from training.spongecake_torch import LayerBatch, eval_stack
 
 HIDDEN = (128, 128, 128)
 LEARNING_RATE = 1e-3
-WEIGHT_DECAY = 1e-4  # AdamW; a few hundred configurations per network, so keep the 3x128 MLP from memorising them
+WEIGHT_DECAY = 1e-4  # AdamW; a few thousand configurations per network: keep the 3x128 MLP from memorising them
 ENERGY_WEIGHT = 2.0  # energy matters most in renders (and the furnace); see lobe_loss
 ENERGY_FLOOR = 1e-3  # about the median configuration's mean f |cos wo| of multiple scattering in the dataset
 VALIDATION_SET = Path(__file__).resolve().parents[1] / "tests" / "data" / "spongecake_ms_validation"
