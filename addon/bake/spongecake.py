@@ -266,22 +266,31 @@ def whiteness_of(params: model.Params) -> np.ndarray:
     return np.min(np.asarray(albedos, dtype=np.float64), axis=0) ** WHITENESS_POWER
 
 
-def energy_table(params: model.Params, left_of, lobes_of, side: float = 1.0) -> np.ndarray:
-    """The energy scale (``ENERGY_KNOTS``, 3) on ``models.spongecake.energy_cosines`` for views above (side 1) or
-    below (-1): ``energy_scale`` of ``left_of(params, wo)`` and ``lobes_of(params, wo)`` (the reference's or a Cycles
-    form's, (N, 3) each), limited by ``white_limit`` where the stack conserves energy once white, and the least over
-    ``ENERGY_AZIMUTHS`` view azimuths where a layer is oriented off the normal, so that no azimuth gains energy."""
+def energy_table(params: model.Params, left_of, lobes_of, side: float = 1.0, per_azimuth: bool = False) -> np.ndarray:
+    """The energy scale on ``models.spongecake.energy_cosines`` for views above (side 1) or below (-1):
+    ``energy_scale`` of ``left_of(params, wo)`` and ``lobes_of(params, wo)`` (the reference's or a Cycles form's,
+    (N, 3) each), limited by ``white_limit`` where the stack conserves energy once white. Where a layer is oriented
+    off the normal the scale depends on the view's azimuth: at ``ENERGY_AZIMUTHS`` azimuths (``energy_azimuths``),
+    (``ENERGY_KNOTS``, P, 3) with ``per_azimuth`` (P = 1 for isotropic stacks), else the least over them,
+    (``ENERGY_KNOTS``, 3), so that no azimuth gains energy (a closure weight that follows the view's angle only)."""
     mu = np.asarray(model.energy_cosines())
-    n_phi = model.ENERGY_AZIMUTHS if model.anisotropic(params) else 1
-    phi = np.tile(np.arange(n_phi) * (2.0 * math.pi / n_phi), len(mu))
-    cos = np.repeat(side * mu, n_phi)
+    phi = energy_azimuths(params)
+    cos = np.repeat(side * mu, len(phi))
     sin = np.sqrt(1.0 - cos * cos)
-    wo = np.stack([sin * np.cos(phi), sin * np.sin(phi), cos], axis=1)
+    wo = np.stack([sin * np.cos(np.tile(phi, len(mu))), sin * np.sin(np.tile(phi, len(mu))), cos], axis=1)
     limit = 1.0
     if model.conserving(params):
         plain = model.white(params)
         limit = white_limit(left_of(plain, wo), lobes_of(plain, wo), whiteness_of(params))
-    return energy_scale(left_of(params, wo), lobes_of(params, wo), limit).reshape(len(mu), n_phi, 3).min(axis=1)
+    table = energy_scale(left_of(params, wo), lobes_of(params, wo), limit).reshape(len(mu), len(phi), 3)
+    return table if per_azimuth else table.min(axis=1)
+
+
+def energy_azimuths(params: model.Params) -> np.ndarray:
+    """The view azimuths of the energy tables: ``ENERGY_AZIMUTHS`` uniform ones from 0 where a layer is oriented off
+    the normal, the one azimuth 0 otherwise."""
+    n_phi = model.ENERGY_AZIMUTHS if model.anisotropic(params) else 1
+    return np.arange(n_phi) * (2.0 * math.pi / n_phi)
 
 
 def white_limit(left_white, lobes_white, whiteness):

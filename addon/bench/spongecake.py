@@ -538,8 +538,10 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               f"{summ['all']['cycles']['max']:.3f}). The worst case is a {worst_view['layers']}-layer stack seen at θo = "
               f"{worst_view['theta']:.0f}°. The energy scale (reference module docstring, [ms-energy]) makes "
               "isotropic white stacks exact at its knots (what remains is the interpolation between them and the "
-              "estimates' noise); where a layer is oriented off the normal the scale is the least over the view's "
-              "azimuths, so those stacks keep what the network under-predicts at the other azimuths."]
+              "estimates' noise); where a layer is oriented off the normal the reference tabulates the scale over the "
+              "view's azimuth too and takes the lesser of the two azimuth knots around the view (exact only at "
+              "them), while the Cycles forms, whose closure weights follow the view's angle only, take the least "
+              "over all azimuths and keep what the network under-predicts at the others."]
     # --- rendered
     from ..reference.spongecake_truth import TruthSettings
 

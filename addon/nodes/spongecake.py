@@ -103,7 +103,8 @@ APPROXIMATIONS = {
                                     {**_one(type="surface", roughness=0.3, thickness=0.3),
                                      "substrate": {"type": "dielectric", "roughness": 0.3, "ior": 1.5}}),
     "ms-energy": ("multiple scattering's energy scale on the form's own single scattering (not the reference's), "
-                  "on 8 view cosines (least over view azimuths); one per material in texture-driven bakes",
+                  "on 8 view cosines (least over view azimuths, which the reference follows); one per material in "
+                  "texture-driven bakes",
                   {**_one(type="surface", roughness=0.5, thickness=1.0), "multiple_scattering": True}),
     "schlick-at-view": ("Schlick F at h = flake normal, not per microfacet (node group reflection; both forms' "
                         "transmission)",

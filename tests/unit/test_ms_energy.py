@@ -4,6 +4,8 @@
 White furnaces are estimated with the reference's own stratified estimator (``furnace_albedo``, 4096 directions per
 view: about 0.3 % noise) and with the numpy prediction of what Cycles renders; every stack here was checked to
 gain or lose energy without the scale (``UNSCALED_GLOW``), so the tests fail if the scale is left out."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -81,7 +83,8 @@ def test_no_stack_gains_energy(name):
     sides = (1.0,) if p.substrate is not None else (1.0, -1.0)
     a = ref.furnace_albedo(p, _views(10, 4, sides), seed=5)
     assert np.all(np.isfinite(a)) and a.min() >= 0.0
-    assert a.max() <= 1.02, a.max(axis=1)
+    # between the tables' knots of an oriented stack (view cosine and azimuth) up to 3% (1.029 measured)
+    assert a.max() <= (1.035 if model.anisotropic(p) else 1.02), a.max(axis=1)
 
 
 def test_a_white_stack_on_a_white_diffuse_substrate_is_exact():
@@ -149,3 +152,22 @@ def test_extremes_give_finite_non_negative_scales(layer):
     values = mapping.ms_values(p)
     energy = np.array([values[mapping.MS_PREFIX + prm.label] for prm in mapping.MS_ENERGY])
     assert np.all(np.isfinite(energy)) and energy.min() >= 0.0
+
+
+def test_the_reference_follows_the_azimuth_of_oriented_stacks():
+    """An oriented white stack: the reference tabulates the scale per view azimuth too, so at the tables' knots it
+    returns what it receives whatever the azimuth (the Cycles forms keep the least over azimuths); an isotropic
+    stack has one azimuth."""
+    p = _params(OTHERS["tilted flakes over in-plane fibers"])
+    above, below = ref.energy_tables(p)
+    phi = bake.energy_azimuths(p)
+    assert above.shape == below.shape == (model.ENERGY_KNOTS, model.ENERGY_AZIMUTHS, 3) == (8, len(phi), 3)
+    assert np.ptp(above[-3], axis=0).max() > 0.05  # the scale does vary with the azimuth
+    mu = np.asarray(model.energy_cosines())[[2, 5, 7]]
+    wo = spherical(np.repeat(mu, len(phi)), np.tile(phi, len(mu)))
+    a = ref.furnace_albedo(p, wo, seed=5)
+    single = ref.furnace_albedo(replace(p, multiple_scattering=False), wo, seed=5)
+    least = single + ref.energy_at(above.min(axis=1), wo) * ref.network_albedo(p, bake.predict(p), wo)
+    assert np.mean(np.abs(a - 1.0)) <= 0.03 and a.max() <= 1.03, a[:, 0]
+    assert np.mean(np.abs(a - 1.0)) < 0.5 * np.mean(np.abs(least - 1.0)) and least.max() <= 1.03
+    assert ref.energy_tables(_params({"layers": WHITE["four layers"]}))[0].shape == (8, 1, 3)
