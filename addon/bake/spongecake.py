@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from ..models import spongecake as model
+from ..reference.frames import spherical
 from . import layer_rows as rows_
 from . import mlp
 
@@ -275,9 +276,7 @@ def energy_table(params: model.Params, left_of, lobes_of, side: float = 1.0, per
     (``ENERGY_KNOTS``, 3), so that no azimuth gains energy (a closure weight that follows the view's angle only)."""
     mu = np.asarray(model.energy_cosines())
     phi = energy_azimuths(params)
-    cos = np.repeat(side * mu, len(phi))
-    sin = np.sqrt(1.0 - cos * cos)
-    wo = np.stack([sin * np.cos(np.tile(phi, len(mu))), sin * np.sin(np.tile(phi, len(mu))), cos], axis=1)
+    wo = spherical(np.repeat(side * mu, len(phi)), np.tile(phi, len(mu)))
     limit = 1.0
     if model.conserving(params):
         plain = model.white(params)

@@ -167,7 +167,7 @@ def test_the_reference_follows_the_azimuth_of_oriented_stacks():
     wo = spherical(np.repeat(mu, len(phi)), np.tile(phi, len(mu)))
     a = ref.furnace_albedo(p, wo, seed=5)
     single = ref.furnace_albedo(replace(p, multiple_scattering=False), wo, seed=5)
-    least = single + ref.energy_at(above.min(axis=1), wo) * ref.network_albedo(p, bake.predict(p), wo)
+    least = single + ref.energy_at(above.min(axis=1, keepdims=True), wo) * ref.network_albedo(p, bake.predict(p), wo)
     assert np.mean(np.abs(a - 1.0)) <= 0.03 and a.max() <= 1.03, a[:, 0]
     assert np.mean(np.abs(a - 1.0)) < 0.5 * np.mean(np.abs(least - 1.0)) and least.max() <= 1.03
     assert ref.energy_tables(_params({"layers": WHITE["four layers"]}))[0].shape == (8, 1, 3)
