@@ -277,12 +277,20 @@ def energy_table(params: model.Params, left_of, lobes_of, side: float = 1.0, per
     mu = np.asarray(model.energy_cosines())
     phi = energy_azimuths(params)
     wo = spherical(np.repeat(side * mu, len(phi)), np.tile(phi, len(mu)))
-    limit = 1.0
-    if model.conserving(params):
-        plain = model.white(params)
-        limit = white_limit(left_of(plain, wo), lobes_of(plain, wo), whiteness_of(params))
-    table = energy_scale(left_of(params, wo), lobes_of(params, wo), limit).reshape(len(mu), len(phi), 3)
+    left, lobes = left_of(params, wo), lobes_of(params, wo)
+    limit, whiteness = 1.0, whiteness_of(params)
+    if model.conserving(params) and whiteness.max() > NEGLIGIBLE_WHITENESS:
+        if np.all(whiteness == 1.0):  # already white: the white stack is this one
+            limit = white_limit(left, lobes, whiteness)
+        else:
+            plain = model.white(params)
+            limit = white_limit(left_of(plain, wo), lobes_of(plain, wo), whiteness)
+    table = energy_scale(left, lobes, limit).reshape(len(mu), len(phi), 3)
     return table if per_azimuth else table.min(axis=1)
+
+
+# Below this whiteness the white stack's limit differs from 1 by less than this share of (ratio - 1): 1 is taken.
+NEGLIGIBLE_WHITENESS = 1e-6
 
 
 def energy_azimuths(params: model.Params) -> np.ndarray:

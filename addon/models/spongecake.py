@@ -25,7 +25,7 @@ OPAQUE_THICKNESS = 30.0
 # changes fastest; views closer to grazing take the first knot's value).
 ENERGY_KNOTS = 8
 MIN_ENERGY_COS = 0.02
-ENERGY_AZIMUTHS = 16  # view azimuths per knot where a layer is oriented off the normal (``energy_tables``)
+ENERGY_AZIMUTHS = 32  # view azimuths per knot where a layer is oriented off the normal (``energy_tables``)
 OPAQUE_SUBSTRATES = ("diffuse", "conductor")  # a dielectric substrate refracts light through the stack
 
 # Flake roughness below this makes the SGGX matrix singular in float32; HG |g| above this is a delta.

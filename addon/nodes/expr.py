@@ -541,7 +541,12 @@ def lobe_fresnel(b, color, eta, alpha):
 
 def schlick_at_view(b, color, f0, normal):
     """Node-group approximation: Schlick's Fresnel evaluated at h = normal (exact at the mirror configuration)."""
-    c = 1.0 - b.maximum(b.dot_view(normal), 0.0)
+    return schlick(b, color, f0, b.dot_view(normal))
+
+
+def schlick(b, color, f0, cos):
+    """``color`` times Schlick's Fresnel F(f0) at cos θ = ``cos`` (clamped at 0)."""
+    c = 1.0 - b.maximum(cos, 0.0)
     c2 = c * c
     return color * (f0 + b.scale(1.0 - f0, c2 * c2 * c))
 

@@ -36,10 +36,11 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
 * substrate: its closure × ∏ τ_j(ωo) × ∏ τ_j(ωi), with ωi the mirror direction for glossy substrates and
   cos θi = 1/2 for a diffuse one (Sec. 4.4). [approx: substrate-attenuation]
 * delta transmission: transparent × ∏ τ_j(ωo) — exact (ωi = −ωo and σ is symmetric); none over a substrate.
-* multiple scattering (Sec. 5): the network's lobe mapped like the layers, plus Lambert lobes, all scaled per view
-  by the baked ``MS Energy`` inputs: the reference's energy scale built on this form's own numpy prediction
-  (``energy_values``), interpolated on the view like ``reference.spongecake.energy_at``; a texture-driven bake
-  keeps the material's own scale for every texel. [approx: ms-energy]
+* multiple scattering (Sec. 5): the network's lobe mapped like the layers, with the closure weights of the view
+  along the normal (computed from the inputs alone: constants Cycles folds) [approx: ms-weights-at-normal], plus
+  Lambert lobes, all scaled per view by the baked ``MS Energy`` inputs: the reference's energy scale built on this
+  form's own numpy prediction (``energy_values``), interpolated on the view like ``reference.spongecake.
+  energy_at``; a texture-driven bake keeps the material's own scale for every texel. [approx: ms-energy]
 
 The node-group form also evaluates Schlick's F at h = flake normal [approx: schlick-at-view];
 the OSL form evaluates it per microfacet (generalized_schlick_bsdf).
@@ -55,7 +56,7 @@ import numpy as np
 from ..models import spongecake as model
 from ..models.params import Param
 from .closures_np import SHARP_ALBEDO
-from .expr import NumpyBackend, closure_furnace, schlick_at_view
+from .expr import NumpyBackend, closure_furnace, schlick
 
 
 # Every approximation the mapping makes, with a configuration that isolates it (docs/accuracy.md measures
@@ -106,6 +107,11 @@ APPROXIMATIONS = {
                   "on 8 view cosines (least over view azimuths, which the reference follows); one per material in "
                   "texture-driven bakes",
                   {**_one(type="surface", roughness=0.5, thickness=1.0), "multiple_scattering": True}),
+    "ms-weights-at-normal": ("the multiple-scattering closures' weights are the layer math's for the view along "
+                             "the normal (constants Cycles folds), their total restored per view by the energy "
+                             "scale: only their split between the closures is that of normal incidence",
+                             {**_one(type="fiber", roughness=0.3, thickness=0.5, orientation=[1, 0, 0]),
+                              "multiple_scattering": True}),
     "schlick-at-view": ("Schlick F at h = flake normal, not per microfacet (node group reflection; both forms' "
                         "transmission)",
                         _one(type="surface", roughness=0.3, thickness=1e4, f0=[0.2, 0.2, 0.2])),
@@ -149,7 +155,7 @@ def approximations_used(p: model.Params) -> list[str]:
     if len(p.layers) > 1:
         used.add("mirror-attenuation")
     if p.multiple_scattering:
-        used.add("ms-energy")
+        used |= {"ms-energy", "ms-weights-at-normal"}
     return [name for name in APPROXIMATIONS if name in used]
 
 
@@ -354,7 +360,7 @@ def _ms_furnace(p: model.Params, wo):
     """Albedo (N, 3) of the form's multiple-scattering closures before the energy scale."""
     single = replace(p, multiple_scattering=False)
     values = {**input_values(single), **_lobe_values(p)}
-    return closure_furnace(lambda w: _numpy_shaded(p, values, w, _unscaled_multiple_scattering), wo, ENERGY_QUADRATURE,
+    return closure_furnace(lambda w: _numpy_shaded(p, values, w, _multiple_scattering), wo, ENERGY_QUADRATURE,
                            SHARP_ALBEDO)
 
 
@@ -375,12 +381,13 @@ def shade(b, p: model.Params) -> None:
     if p.delta_transmission and p.substrate is None:  # every substrate blocks or refracts it (reference)
         b.transparent(b.scale((1.0, 1.0, 1.0), stack))
     if p.multiple_scattering:
-        _multiple_scattering(_EnergyScaled(b, _energy(b, mu)), p, mu)
+        _multiple_scattering(_EnergyScaled(b, _energy(b, mu)), p)
 
 
-def _layers(b, p: model.Params, mu, prefix: str) -> list[dict]:
-    """Each layer's closures (inputs named ``prefix + "L<k> ..."``); returns the per-layer terms."""
-    terms = [_layer_terms(b, prefix + f"L{k + 1} ", layer, mu) for k, layer in enumerate(p.layers)]
+def _layers(b, p: model.Params, mu, prefix: str, along_normal: bool = False) -> list[dict]:
+    """Each layer's closures (inputs named ``prefix + "L<k> ..."``); returns the per-layer terms. ``along_normal``:
+    the closures' weights for the view along the normal (``_layer_terms``), whatever the view."""
+    terms = [_layer_terms(b, prefix + f"L{k + 1} ", layer, mu, along_normal) for k, layer in enumerate(p.layers)]
     taus = [t["tau"] for t in terms]
     for k, (layer, t) in enumerate(zip(p.layers, terms)):
         above = _prod(*taus[:k]) if k else None
@@ -391,7 +398,7 @@ def _layers(b, p: model.Params, mu, prefix: str) -> list[dict]:
             b.glossy(b.scale(t["albedo"], _prod(t.get("glossy_share"), reflected)), t["alpha_x"], t["alpha_y"],
                      t["normal"], t.get("tangent"), t.get("f0"))
             if "f0" in t:
-                transmitted = schlick_at_view(b, transmitted, t["f0"], t["normal"])
+                transmitted = schlick(b, transmitted, t["f0"], t["cos_normal"])
         if "diffuse_share" in t:
             diffuse = t["diffuse_share"] * t["path"] * _slab_reflection(b, t)
             b.diffuse(b.scale(t["albedo"], _prod(diffuse, above, above)))
@@ -400,18 +407,17 @@ def _layers(b, p: model.Params, mu, prefix: str) -> list[dict]:
     return terms
 
 
-def _multiple_scattering(b, p: model.Params, mu) -> None:
+def _multiple_scattering(b, p: model.Params) -> None:
     """Sec. 5: the network's extra single-scattering lobe (its parameters baked into the ``MS`` inputs, W1 in
-    the albedo), mapped like the layers themselves, plus the Lambert lobes W2r / π and W2t / π (exact). ``shade``
-    passes a backend that scales these closures by the energy scale (``_EnergyScaled``)."""
-    _layers(b, p, mu, MS_PREFIX)
+    the albedo), mapped like the layers themselves but with the closure weights of the view along the normal,
+    plus the Lambert lobes W2r / π and W2t / π (exact). ``shade`` passes a backend that scales these closures by
+    the per-view energy scale (``_EnergyScaled``), which restores the lobe's energy at each view: the weights'
+    split between the closures is that of normal incidence. Computed from the inputs alone, these weights are
+    constants that Cycles folds when the inputs are baked values. [approx: ms-weights-at-normal]"""
+    _layers(b, p, 1.0, MS_PREFIX, along_normal=True)
     b.diffuse(b.input(MS_PREFIX + "Reflection", "color"))
     if p.substrate is None:
         b.translucent(b.input(MS_PREFIX + "Transmission", "color"))
-
-
-def _unscaled_multiple_scattering(b, p: model.Params) -> None:
-    _multiple_scattering(b, p, b.cos_view())
 
 
 def _energy(b, mu):
@@ -460,24 +466,31 @@ def _slab_reflection(b, t):
     return (1.0 - b.exp(-s)) / b.maximum(s, 1e-12)
 
 
-def _layer_terms(b, name: str, layer: model.Layer, mu) -> dict:
+def _layer_terms(b, name: str, layer: model.Layer, mu, along_normal: bool = False) -> dict:
+    """A layer's closure terms seen at the view (cosine ``mu``), or, ``along_normal``, at the view along the
+    normal (mu = 1) from the tangent-space inputs alone."""
     rough = b.input(name + ("Roughness" if layer.is_flake else "Mean Cosine g"), "float")
     t = {"albedo": b.input(name + "Albedo", "color")}
     thickness = b.input(name + "Thickness", "float")
     sigma = sigma_60 = 1.0
     if layer.is_flake:
-        direction = b.direction(b.input(name + "Orientation", "vector"))
+        local = b.input(name + "Orientation", "vector")
+        direction = b.direction(local)
         if layer.type == "surface":  # S is the same for ±n (two-sided flakes): the closure normal points up
             direction = b.upper_hemisphere(direction)
-        c, c_n = b.dot_view(direction), b.dot(direction, b.normal())
+        if along_normal:  # c = c_n = the orientation's normalised z (|z| for the flipped-up flake normal)
+            z = b.channel(local, 2) / b.sqrt(b.maximum(b.dot(local, local), 1e-24))
+            c = c_n = b.abs(z) if layer.type == "surface" else z
+        else:
+            c, c_n = b.dot_view(direction), b.dot(direction, b.normal())
         a2 = rough * rough
         # σ(ω) = sqrt(ωᵀ S ω) for S of Sec. 3.3 rotated to the orientation (research notes §1)
         if layer.type == "surface":
             sigma, sigma2_n, trace = b.sqrt(a2 + (1.0 - a2) * c * c), a2 + (1.0 - a2) * c_n * c_n, 1.0 + 2.0 * a2
-            t.update(alpha_x=rough, alpha_y=rough, normal=direction)
+            t.update(alpha_x=rough, alpha_y=rough, normal=direction, cos_normal=c)
         else:
             sigma, sigma2_n, trace = b.sqrt(1.0 + (a2 - 1.0) * c * c), 1.0 + (a2 - 1.0) * c_n * c_n, 2.0 + a2
-            t.update(_fiber_lobe(b, rough, c_n, direction))
+            t.update(_fiber_lobe(b, rough, c_n, direction), cos_normal=mu)
         # σ at 60° from n, mean over azimuth: σ² = sin²60 (tr S − S_nn)/2 + cos²60 S_nn
         sigma_60 = b.sqrt(0.375 * (trace - sigma2_n) + 0.25 * sigma2_n)
         if layer.has_fresnel:

@@ -18,16 +18,16 @@ Conventions (local frame, z = macro normal; ``wi`` points to the light, ``wo`` t
 * With ``multiple_scattering``, ``eval`` adds the network's two lobes (Sec. 5) and ``sample``/``pdf`` still
   sample single scattering only, as the paper does (Sec. 4.5); the sample weight uses the full f.
 * Energy (``energy_tables``; not in the paper): the network's lobes are scaled per view by
-  s(ωo) = min(left(ωo) / E(ωo), limit), tabulated on ``ENERGY_KNOTS`` view cosines (linear in √|μo|) and, where
-  a layer is oriented off the normal, ``ENERGY_AZIMUTHS`` view azimuths (the lesser of the two around the view). left = 1 − A_ss − T_δ is what
-  single scattering and the Dirac leave (whether the Dirac is rendered or not), E the directional albedo of the
-  network's lobes: single plus multiple scattering never return more than they receive. The limit is 1 (the
-  network's energy wherever it fits in), except for stacks that conserve energy once white (``models.spongecake.
-  conserving``: no Fresnel flakes, no substrate or a diffuse one), where it moves towards left_white / E_white, the
-  scale that gives the white stack exactly its leftover, by the stack's whiteness (``bake.spongecake.
-  whiteness_of``): a white isotropic stack returns exactly what it receives at the knots. The scale follows the view
-  alone, as a Cycles closure weight does, so the scaled lobes are reciprocal only where it is the same at both
-  directions. [named: ms-energy]
+  s(ωo) = min(left(ωo) / E(ωo), limit), tabulated on ``ENERGY_KNOTS`` view cosines (linear in √|μo|) and, where a
+  layer is oriented off the normal, ``ENERGY_AZIMUTHS`` view azimuths (the lesser of the two around the view).
+  left = 1 − A_ss − T_δ is what single scattering and the Dirac leave (whether the Dirac is rendered or not), E the
+  directional albedo of the network's lobes: single plus multiple scattering never return more than they receive.
+  The limit is 1 (the network's energy wherever it fits in), except for stacks that conserve energy once white
+  (``models.spongecake.conserving``: no Fresnel flakes, no substrate or a diffuse one), where it moves towards
+  left_white / E_white, the scale that gives the white stack exactly its leftover, by the stack's whiteness
+  (``bake.spongecake.whiteness_of``): a white isotropic stack returns exactly what it receives at the knots. The
+  scale follows the view alone, as a Cycles closure weight does, so the scaled lobes are reciprocal only where it
+  is the same at both directions. [named: ms-energy]
 * Sampling picks a lobe with P(first collision in layer k) = (1 - tau_k(wi)) prod_{j between} tau_j(wi), the
   substrate (or the Dirac) with prod_k tau_k(wi), renormalised (uniform over the continuous lobes when all
   vanish, where f = 0 anyway). ``pdf`` is the exact density of the continuous samples; a Dirac sample has

@@ -231,3 +231,32 @@ def test_what_the_mapping_renders_exactly_reports_no_approximation():
     # an opaque stack's transmission lobes carry nothing: their approximations are not in use
     plastic = mapping.approximations_used(model.params_from_dict(presets.load(model.ID, "plastic")))
     assert "translucent-lobe" not in plastic and "substrate-attenuation" in plastic
+
+
+@pytest.mark.parametrize("name", ["fabric", "window_shade", "leaf"])
+def test_multiple_scattering_closures_follow_the_view_only_through_the_energy_scale(name):
+    """[ms-weights-at-normal]: the lobe's closure weights are those of the view along the normal at every view."""
+    from dataclasses import replace
+
+    p = replace(model.params_from_dict(presets.load(model.ID, name)), multiple_scattering=True)
+    wo = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8], [0.0, 0.98, 0.199], [0.4, -0.3, -0.866]])
+    b = expr.NumpyBackend(wo, mapping.input_values(p), form="osl")
+    mapping._multiple_scattering(b, p)
+    assert len(b.closures) >= 2
+    for kind, color, _ in b.closures:
+        np.testing.assert_allclose(color, np.broadcast_to(color[0], color.shape), rtol=1e-12, err_msg=kind)
+
+
+def test_with_view_independent_weights_a_white_stack_still_returns_what_it_receives_at_the_knots():
+    """The energy scale restores each view's total [ms-weights-at-normal, ms-energy]: a white isotropic stack
+    with multiple scattering is 1 in the form's furnace at the scale's knots."""
+    white = model.params_from_dict({"layers": [
+        {"type": "surface", "roughness": 0.3, "albedo": [1, 1, 1], "thickness": 0.5},
+        {"type": "hg", "roughness": 0.4, "albedo": [1, 1, 1], "thickness": 1.0}],
+        "multiple_scattering": True, "delta_transmission": True})
+    mu = np.asarray(model.energy_cosines())[[2, 5, 7]]
+    views = np.stack([np.sqrt(1.0 - mu * mu), 0.0 * mu, mu], axis=1)
+    furnace = expr.closure_furnace(lambda w: mapping._numpy_shaded(white, mapping.input_values(white), w,
+                                                                  mapping.shade),
+                                   views, mapping.ENERGY_QUADRATURE, closures_np.SHARP_ALBEDO)
+    np.testing.assert_allclose(furnace, 1.0, atol=2e-3)
