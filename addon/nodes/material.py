@@ -29,7 +29,8 @@ from . import FORMS, MAPPING_KINDS, MAPPINGS, choice, fittable, fitted, image_va
 from .expr import BULK_INPUT, TANGENT_INPUT, NumpyBackend, OslBackend
 from .node_backend import NodeBackend
 
-GENERATOR_VERSION = 3  # bump when generated shaders change, so cached groups are not reused
+GENERATOR_VERSION = 4  # bump when generated shaders change, so cached groups are not reused
+GENERATOR_KEY = "lamina_generator"  # the GENERATOR_VERSION that built a material's Lamina node
 # What the numpy prediction (and so a fit) assumes of node groups follows the running Blender: 4.2 has no Metallic
 # BSDF node.
 NumpyBackend.metallic_node = NodeBackend.has_metal()
@@ -479,23 +480,27 @@ _ms_shares: dict[str, float] = {}
 
 def ms_key(model_id: str, p) -> str:
     """Identifies a multiple-scattering bake: the parameters, the manifest of the network that predicts them and the
-    version of what is baked from its prediction (``MS_VERSION``)."""
+    version of what is baked from its prediction (``MS_VERSION``) and the generator whose shader the baked energy
+    scale fits (``GENERATOR_VERSION``)."""
     bake = importlib.import_module(f"..bake.{model_id}", __package__)
-    text = json.dumps([p.to_dict(), bake.network(len(p.layers)).manifest, bake.MS_VERSION], sort_keys=True)
+    text = json.dumps([p.to_dict(), bake.network(len(p.layers)).manifest, bake.MS_VERSION, GENERATOR_VERSION],
+                      sort_keys=True)
     return hashlib.md5(text.encode()).hexdigest()
 
 
 def bake_constants(mat) -> bool:
     """Write the network's prediction for the current parameters into the Lamina node's ``MS`` inputs (linked
     ones, e.g. driven by baked textures, are left alone) and record the bake key. Returns whether anything
-    changed; a material without multiple scattering only loses its bake key. A Lamina node that lacks some of these
-    inputs (made by an earlier Lamina) is rebuilt first, keeping the form and the mapping choice."""
+    changed; a material without multiple scattering only loses its bake key. A Lamina node made by another generator
+    (an earlier Lamina: its inputs or its closures may differ from what the values are computed for) is rebuilt
+    first, keeping the form and the mapping choice."""
     model_id, p = current_params(mat)
     node = shader_node(mat)
     if not getattr(p, "multiple_scattering", False) or node is None:
         return mat.pop(MS_KEY, None) is not None
     values = MAPPINGS[model_id].ms_values(p)
-    if any(socket_key(node, name) not in node.inputs for name in values):  # made before these inputs existed
+    missing = any(socket_key(node, name) not in node.inputs for name in values)
+    if missing or mat.get(GENERATOR_KEY) != GENERATOR_VERSION:
         _rebuild(mat, model_id, p, form_of(mat), mapping_of(mat), refit=False)
         return True
     changed = _write_values(node, values)
@@ -541,6 +546,7 @@ def _build_tree(mat, model_id: str, p, form: str, fit=None) -> None:
     node, bulk = _new_nodes(mat, model_id, p, form, fit)
     _replace(mat, shader_node(mat), node)
     _place_bulk(mat, bulk)
+    mat[GENERATOR_KEY] = GENERATOR_VERSION
 
 
 def _new_nodes(mat, model_id: str, p, form: str, fit=None):

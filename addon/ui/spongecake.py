@@ -28,7 +28,7 @@ def draw_extra(layout, context, mat) -> None:
         box.label(text=f"{NETWORK_LAYERS}-layer network, layers grouped in two (an approximation)", icon="INFO")
     stale = lamina_material.ms_is_stale(mat)
     if stale:
-        box.label(text="Parameters changed since the last bake", icon="ERROR")
+        box.label(text="Needs a re-bake: parameters, network or Lamina changed", icon="ERROR")
     else:
         box.label(text=f"Multiple scattering: {lamina_material.ms_energy_share(mat):.0%} of the leaving energy")
     row = box.row(align=True)

@@ -111,6 +111,21 @@ def test_rebaking_a_node_made_before_the_energy_inputs_rebuilds_it():
     _assert_ms_inputs_are_the_prediction(mat)
 
 
+def test_a_material_from_another_generator_is_stale_and_rebake_rebuilds_its_node():
+    """A file from an earlier Lamina whose node has every input but other closures (an older generator): the panel
+    asks for a re-bake, and Re-bake rebuilds the node before writing values that fit the current closures."""
+    mat = material.new_material(model.ID, _preset("fabric", multiple_scattering=True), "nodes")
+    old = material.shader_node(mat).node_tree.copy()  # the earlier generator's group, under its own name
+    material.shader_node(mat).node_tree = old
+    mat[material.GENERATOR_KEY] = material.GENERATOR_VERSION - 1
+    mat[material.MS_KEY] = "a key made by the earlier Lamina"
+    assert material.ms_is_stale(mat) and "Needs a re-bake" in panel_text(mat)
+    assert material.bake_constants(mat)
+    assert material.shader_node(mat).node_tree is not old and mat[material.GENERATOR_KEY] == material.GENERATOR_VERSION
+    assert not material.ms_is_stale(mat)
+    _assert_ms_inputs_are_the_prediction(mat)
+
+
 def test_rebake_leaves_linked_inputs_alone():
     mat = material.new_material(model.ID, _preset("fabric", multiple_scattering=True), "nodes")
     node = material.shader_node(mat)
@@ -210,7 +225,7 @@ def test_panel_shows_toggle_share_stale_warning_and_rebake():
     assert f"Multiple scattering: {material.ms_energy_share(mat):.0%} of the leaving energy" in text
     assert ("lamina.bake_textures" in text) == hasattr(bpy.types, "LAMINA_OT_bake_textures")
     _set_thickness(mat, 3.0)
-    assert "Parameters changed since the last bake" in panel_text(mat)
+    assert "Needs a re-bake: parameters, network or Lamina changed" in panel_text(mat)
     text = panel_text(material.new_material(model.ID, _preset("leaf", multiple_scattering=True), "nodes"))
     assert "layers grouped in two (an approximation)" in text and "lamina.rebake" in text
     text = panel_text(material.new_material(model.ID, _preset("leaf"), "nodes"))
