@@ -384,24 +384,41 @@ def directional_albedo(params: Params, wo, n: int = 16384, seed: int = 0, split:
 
     Deterministic (seeded) stratified estimate with two techniques combined by the balance heuristic: the
     sampler from wo (f is reciprocal up to the dielectric's eta^2) for 7/8 of the samples, uniform directions
-    for the rest. The Dirac part is excluded: add ``delta_transmittance(params, wo)`` for a furnace.
+    for the rest. The Dirac part is excluded: add ``delta_transmittance(params, wo)`` for a furnace. Each view
+    draws its own stratified samples; views are evaluated together, ``ALBEDO_CHUNK`` samples at a time.
     """
     wo = as_directions(wo)
     rng = np.random.default_rng(seed)
+    draws = [(_stratified((7 * n) // 8, rng), _stratified(n // 8, rng)) for _ in wo]
     reflection, transmission = np.zeros((len(wo), 3)), np.zeros((len(wo), 3))
-    for row, w in enumerate(wo):
-        u_b, u = _stratified((7 * n) // 8, rng), _stratified(n // 8, rng)
-        n_b, n_u = len(u_b), len(u)
-        s = sample(params, np.repeat(w[None], n_b, axis=0), u_b)
-        x_u = spherical(2.0 * u[:, 1] - 1.0, 2.0 * np.pi * u[:, 2])
-        x = np.concatenate([s.wo[~s.is_delta], x_u])
-        ws = np.repeat(w[None], len(x), axis=0)
-        q = n_b * pdf(params, ws, x) + n_u / (4.0 * np.pi)
-        value = eval(params, x, ws) * np.abs(x[:, 2:]) / q[:, None]
-        same = (x[:, 2] * w[2] > 0)[:, None]
-        reflection[row] = np.sum(value * same, axis=0)
-        transmission[row] = np.sum(value * ~same, axis=0)
+    per_chunk = max(1, ALBEDO_CHUNK // max(n, 1))
+    for start in range(0, len(wo), per_chunk):
+        rows = slice(start, start + per_chunk)
+        reflection[rows], transmission[rows] = _albedo_rows(params, wo[rows], draws[rows])
     return (reflection, transmission) if split else reflection + transmission
+
+
+ALBEDO_CHUNK = 1 << 18  # samples per array in ``directional_albedo``
+
+
+def _albedo_rows(params: Params, wo, draws):
+    """``directional_albedo``'s (reflection, transmission) of the views ``wo`` (K, 3) from their draws."""
+    k = len(wo)
+    n_b, n_u = len(draws[0][0]), len(draws[0][1])
+    row_b, row_u = np.repeat(np.arange(k), n_b), np.repeat(np.arange(k), n_u)
+    s = sample(params, wo[row_b], np.concatenate([d[0] for d in draws]))
+    u = np.concatenate([d[1] for d in draws])
+    x = np.concatenate([s.wo[~s.is_delta], spherical(2.0 * u[:, 1] - 1.0, 2.0 * np.pi * u[:, 2])])
+    row = np.concatenate([row_b[~s.is_delta], row_u])
+    ws = wo[row]
+    q = n_b * pdf(params, ws, x) + n_u / (4.0 * np.pi)
+    value = eval(params, x, ws) * np.abs(x[:, 2:]) / q[:, None]
+    same = x[:, 2] * ws[:, 2] > 0
+
+    def per_row(mask):
+        return np.stack([np.bincount(row, weights=value[:, c] * mask, minlength=k) for c in range(3)], axis=1)
+
+    return per_row(same), per_row(~same)
 
 
 def furnace_albedo(params: Params, wo, n: int = 4096, seed: int = 0):
