@@ -29,7 +29,7 @@ from . import FORMS, MAPPING_KINDS, MAPPINGS, choice, fittable, fitted, image_va
 from .expr import BULK_INPUT, TANGENT_INPUT, NumpyBackend, OslBackend
 from .node_backend import NodeBackend
 
-GENERATOR_VERSION = 4  # bump when generated shaders change, so cached groups are not reused
+GENERATOR_VERSION = 5  # bump when generated shaders change, so cached groups are not reused
 GENERATOR_KEY = "lamina_generator"  # the GENERATOR_VERSION that built a material's Lamina node
 # What the numpy prediction (and so a fit) assumes of node groups follows the running Blender: 4.2 has no Metallic
 # BSDF node.

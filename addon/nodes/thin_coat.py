@@ -21,7 +21,8 @@ in backend math), and each lobe becomes one closure whose weight depends on the 
   mirror configuration (as for the top) overshoots the lobe's energy many times over at grazing views; the colour is
   W_k ε(θo, κ̂), ε the ratio of the two lobes' energies by a fit (``energy_ratio``; ``energy_ratio_error``).
   [approx: endf-as-beckmann]
-* Diffuse order k (Lambertian base): a Diffuse BSDF of colour π W_k ē, the light-side factor entry(θi) (the
+* Diffuse orders (Lambertian base): one Diffuse BSDF of colour π ē Σ_k W_k (the orders share the closure's
+  shape, so their sum is exact and costs one closure at any bounce count), the light-side factor entry(θi) (the
   crossing of the top and the absorption on the way in, ``reference.thin_coat.entry``) replaced by its
   cosine-weighted hemispherical mean ē (``mean_entry``, 3 nodes): a closure weight cannot depend on the light; the
   energy under uniform light is kept (the view's entry(θo), exact at the mirror configuration only, was tried and
@@ -190,7 +191,7 @@ def shade(b, p: model.Params) -> None:
     elif base.type == "diffuse":
         inputs["albedo"] = b.input("Base Color", "color")
     k1 = inputs["kappa_top"]
-    entry = None
+    diffuse = None  # every order over a Lambertian base: one Diffuse closure (their sum, exact)
     for lobe in reference.lobes(ops, replace(p, base=base), mu, 0, inputs):
         if lobe.kind == "surface":
             alpha = lobe_alpha(b, k1)
@@ -201,13 +202,13 @@ def shade(b, p: model.Params) -> None:
             alpha = lobe_alpha(b, lobe.kappa)
             b.beckmann(b.scale(lobe.weight, energy_ratio(b, mu, lobe.kappa, alpha)), alpha)
         elif lobe.kind == "diffuse":
-            if entry is None:
-                entry = mean_entry(ops, eta, k1, sigma_d)
-            b.diffuse(b.scale(lobe.weight * entry, np.pi))
+            diffuse = lobe.weight if diffuse is None else diffuse + lobe.weight
         else:
             stretch = 1.0 - 1.0 / SLAB_IOR  # direction deviation per facet tilt at normal incidence
             alpha = lobe_alpha(b, lobe.kappa, stretch)
             b.beckmann_refraction(lobe.weight, alpha, SLAB_IOR, b.view())
+    if diffuse is not None:
+        b.diffuse(b.scale(diffuse * mean_entry(ops, eta, k1, sigma_d), np.pi))
 
 
 # Gauss-Legendre nodes in v = cos²θ on [0, 1] for the cosine-weighted mean over the light's directions.
