@@ -11,7 +11,7 @@ DATA ?= $(HOME)/.cache/lamina/spongecake-ms
 # Neural participating media: tables of double and multiple scattering per material (resumable; docs/training.md).
 MEDIUM_DATA ?= $(HOME)/.cache/lamina/neural-medium
 
-.PHONY: venv test test-5.0 test-4.2 test-all demo bench assets extension dataset train train-1 train-2 validation-set medium-dataset medium-networks clean
+.PHONY: venv test test-5.0 test-unit test-blender-5.0 test-4.2 test-all demo bench assets extension dataset train train-1 train-2 validation-set medium-dataset medium-networks clean
 
 venv: $(VENV)/.stamp
 
@@ -28,13 +28,19 @@ $(VENV42)/.stamp: requirements-blender-4.2.txt
 	$(PY42) -m pip install --quiet -r requirements-blender-4.2.txt
 	touch $@
 
-# The whole suite on bpy 5.0 and, beside it on the other core, the Blender tests on Blender 4.2 LTS (the oldest
-# supported); each suite's output is printed whole when it ends (-O), and make fails if either does.
+# Three suites on the two cores, the longest first: the Blender tests on bpy 5.0 and on Blender 4.2 LTS (the oldest
+# supported), then the unit tests on the core that frees first; each suite's output is printed whole when it ends
+# (-O), and make fails if any does. test-5.0 is both suites on bpy 5.0.
 test: venv $(VENV42)/.stamp
-	$(MAKE) --no-print-directory -j2 -O test-5.0 test-4.2
+	$(MAKE) --no-print-directory -j2 -O test-blender-5.0 test-4.2 test-unit
 
-test-5.0: venv
-	$(PY) -m pytest -m "not slow" -q -p no:cacheprovider
+test-5.0: test-unit test-blender-5.0
+
+test-unit: venv
+	$(PY) -m pytest -m "not slow" -q -p no:cacheprovider tests/unit
+
+test-blender-5.0: venv
+	$(PY) -m pytest -m "not slow" -q -p no:cacheprovider tests/blender
 
 test-4.2: $(VENV42)/.stamp
 	$(PY42) -m pytest -m "not slow" -q -p no:cacheprovider tests/blender

@@ -50,6 +50,7 @@ def test_every_output_is_finite_and_non_negative(layer, thickness):
             _check(*spongecake.ground_truth(p, wi, wo, n_paths=8, seed=0, max_depth=4))
 
 
+@pytest.mark.usefixtures("coarse_energy_tables")
 @pytest.mark.parametrize("thickness", [1e-6, 1e4])
 @pytest.mark.parametrize("layer", LAYERS, ids=lambda d: "-".join(str(v) for v in d.values()))
 def test_multiple_scattering_lobes_are_finite_and_non_negative(layer, thickness):
