@@ -16,6 +16,7 @@ from .asset_catalogs import PREVIEW_SAMPLES, PREVIEW_SIZE
 from .models import MODELS, REGISTRY
 from .models.params import ParamError
 from .nodes import FORMS, MAPPING_KINDS, fittable, principled_models
+from .nodes.budget import DEFAULT_BUDGET, BudgetError, checked_budget
 from .reference import truth_models
 from .reference.neural_medium_truth import COMPARE_SHAPES
 from .reference.scenes import KINDS
@@ -94,6 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
     bn.add_argument("--model", action="append", choices=list(REGISTRY),
                     help="measure only this model again (repeatable) and replace its sections in the existing pages "
                          "(a model without a section there gets one at the end)")
+    bn.add_argument("--part", choices=("accuracy", "speed"),
+                    help="with --model: measure only this page (accuracy.md or benchmarks.md); default both")
     bn.add_argument("--samples", type=int, default=64)
     bn.add_argument("--resolution", type=int, default=64)
     bn.add_argument("--no-ms", action="store_true", help="leave out the multiple-scattering sections")
@@ -109,6 +112,17 @@ def build_parser() -> argparse.ArgumentParser:
     bk.add_argument("--blend", required=True, help="the .blend to open")
     bk.add_argument("--material", required=True, help="the Lamina material to bake")
     _blend_output_args(bk)
+
+    op = sub.add_parser("optimize", help="rebuild Lamina materials of a .blend in the cheapest configuration within "
+                                         "an error budget (Fit to budget) and save the .blend")
+    op.add_argument("--blend", required=True, help="the .blend to open")
+    g = op.add_mutually_exclusive_group(required=True)
+    g.add_argument("--material", action="append", help="a Lamina material to fit (repeatable)")
+    g.add_argument("--all", action="store_true", help="every Lamina material of the file")
+    op.add_argument("--budget", type=float, default=DEFAULT_BUDGET,
+                    help="relative RMSE allowed above the most accurate configuration (default %(default)g); OSL "
+                         "forms are candidates only where every scene of the file renders OSL")
+    _blend_output_args(op)
 
     ad = sub.add_parser("add-porous", help="add a micrograin porous layer (dust, rust, ...) over a material of a "
                                            ".blend: a new material, assigned wherever the original was used")
@@ -392,6 +406,8 @@ def cmd_bench(args) -> int:
 
     out = _checked(paths.output_folder, "--out", args.out, True)  # the benchmark pages are rewritten in place
     _at_least(args, samples=1, resolution=8)
+    if args.part and not args.model:
+        raise CliError("bench --part needs --model: a whole run writes both pages")
     ms = None
     if not args.no_ms:
         from .reference.spongecake_truth import TruthSettings
@@ -405,7 +421,8 @@ def cmd_bench(args) -> int:
                            speed_repeats=args.ms_repeats, bake_size=args.ms_bake_size)
     os.makedirs(out, exist_ok=True)
     try:
-        bench.run(out, bench.Sizes(samples=args.samples, resolution=args.resolution, ms=ms), models=args.model)
+        bench.run(out, bench.Sizes(samples=args.samples, resolution=args.resolution, ms=ms), models=args.model,
+                  parts=(args.part,) if args.part else bench.PARTS)
     except FileNotFoundError as e:  # --model without the pages of a whole run
         raise CliError(f"bench --model: {e.filename} does not exist: run the whole `make bench` first") from None
     return 0
@@ -431,6 +448,24 @@ def cmd_bake(args) -> int:
         raise CliError(str(e)) from None
     _warn(warnings)
     print(f"lamina: {summary}; wrote {out}")
+    return 0
+
+
+def cmd_optimize(args) -> int:
+    try:
+        value = checked_budget(args.budget)
+    except BudgetError as e:
+        raise CliError(f"--budget {e}") from None
+    blend, out = _blend_paths(args)
+    from .operators import blend_io, budget_ops
+
+    try:
+        lines = budget_ops.optimize_file(blend, args.material or [], value, out)
+    except blend_io.BlendArgumentError as e:
+        raise CliError(str(e)) from None
+    for line in lines:
+        print(f"lamina: {line}")
+    print(f"lamina: wrote {out}")
     return 0
 
 
@@ -532,8 +567,8 @@ def cmd_assets(args) -> int:
 
 
 COMMANDS = {"list-presets": cmd_list_presets, "make-material": cmd_make_material, "compare": cmd_compare,
-            "demo": cmd_demo, "bench": cmd_bench, "bake": cmd_bake, "add-porous": cmd_add_porous,
-            "bake-medium": cmd_bake_medium, "compare-medium": cmd_compare_medium, "assets": cmd_assets}
+            "demo": cmd_demo, "bench": cmd_bench, "bake": cmd_bake, "optimize": cmd_optimize,
+            "add-porous": cmd_add_porous, "bake-medium": cmd_bake_medium, "compare-medium": cmd_compare_medium, "assets": cmd_assets}
 
 # Lamina's temporary names (``bake.exr.atomic_path``'s ".<name>.<random>.tmp.<ext>", ``paths.staged_folder``'s
 # ".<name>.<random>.lamina-tmp"): a message shows the final name instead.

@@ -7,8 +7,8 @@ has (ground truths, networks, geometric terms). Speed: reference throughput, and
 : OSL : Principled BSDF from one run.
 
 Every model of the registry with a module here (``bench/<model id>.py``) contributes its sections through
-``accuracy(sizes)`` and ``speed(sizes)`` (``Sizes``), in registry order; docs/images/overview.png shows every
-model's presets.
+``accuracy(sizes)`` and ``speed(sizes)`` (``Sizes``), in registry order; Fit to budget's section (``budget``), which
+spans every model, ends docs/benchmarks.md; docs/images/overview.png shows every model's presets.
 """
 from __future__ import annotations
 
@@ -107,10 +107,15 @@ def splice(text: str, model_id: str, section: str, note: str) -> str:
     return text[:i] + body.lstrip("\n") + text[j + len(end) + 1:]
 
 
-def run(out_dir: str, sizes: Sizes = Sizes(), models: list[str] | None = None) -> None:
-    """Both documents and the overview picture into ``out_dir``; with ``models``, only those models' sections are
-    measured again and replaced in the existing documents (the overview picture is left as it is)."""
+PARTS = ("accuracy", "speed")  # docs/accuracy.md, docs/benchmarks.md
+
+
+def run(out_dir: str, sizes: Sizes = Sizes(), models: list[str] | None = None, parts=PARTS) -> None:
+    """Both documents and the overview picture into ``out_dir``; with ``models``, only those models' sections of the
+    documents of ``parts`` are measured again and replaced in the existing documents (the overview picture is left as
+    it is)."""
     from ..operators.compare_run import write_text_atomic
+    from . import budget  # not at the top: ``python -m addon.bench.budget`` imports this package first
 
     os.makedirs(out_dir, exist_ok=True)
     if models is None:
@@ -118,9 +123,13 @@ def run(out_dir: str, sizes: Sizes = Sizes(), models: list[str] | None = None) -
     benches = [b for b in model_benches() if models is None or b.MODEL in models]
     for name, header, section in (("accuracy.md", accuracy_header(sizes.resolution), "accuracy"),
                                   ("benchmarks.md", speed_header(sizes.timing_samples), "speed")):
+        if section not in parts:
+            continue
         path = os.path.join(out_dir, name)
         if models is None:
             text = header + "".join(marked(b.MODEL, getattr(b, section)(sizes)) for b in benches)
+            if section == "speed":  # Fit to budget chooses among every model's configurations
+                text += marked(budget.SECTION, budget.speed(sizes))
         else:
             with open(path, encoding="utf-8") as f:
                 text = f.read()

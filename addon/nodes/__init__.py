@@ -1,6 +1,6 @@
 """Cycles shaders generated from each model's mapping (``<model>.py``, bpy-free) in two forms:
 a native node group (``node_backend``) and an OSL script node (``osl``); ``material`` assembles them."""
-from . import aniso_stack, bulk, fitted, micrograin, spongecake, thin_coat
+from . import aniso_stack, bulk, fitted, micrograin, pruning, spongecake, thin_coat
 
 # Model id -> mapping; "bulk" is the simple BSDFs that reference bulks under a porous layer are made of.
 MAPPINGS = {"spongecake": spongecake, "micrograin": micrograin, "thin_coat": thin_coat, "aniso_stack": aniso_stack,
@@ -40,20 +40,28 @@ def principled_models() -> list[str]:
     return [m for m in MAPPINGS if principled_counterpart(m) is not None]
 
 
-def _backend(model_id: str, p, form: str, wo, fit=None):
+def numpy_backend(model_id: str, p, form: str, wo):
+    """A ``NumpyBackend`` for ``p`` at the views ``wo``, no closures yet."""
     from .expr import NumpyBackend
 
     mapping = MAPPINGS[model_id]
     bulk = mapping.numpy_bulk(p, form) if hasattr(mapping, "numpy_bulk") else None
-    b = NumpyBackend(wo, mapping.input_values(p), form, bulk)
+    return NumpyBackend(wo, mapping.input_values(p), form, bulk)
+
+
+def _backend(model_id: str, p, form: str, wo, fit=None):
+    b = numpy_backend(model_id, p, form, wo)
     shade(b, model_id, p, fit)
     return b
 
 
 def shade(b, model_id: str, p, fit=None) -> None:
-    """The closures of ``p`` on backend ``b``: the mapping's own (``fit`` None) or the fitted ones."""
+    """The closures of ``p`` on backend ``b``: the mapping's own (``fit`` None), the fitted ones (a ``fitted.Fit``),
+    or the mapping's own less those a ``pruning.Pruned`` leaves out."""
     if fit is None:
         MAPPINGS[model_id].shade(b, p)
+    elif isinstance(fit, pruning.Pruned):
+        pruning.shade(b, MAPPINGS[model_id], p, fit)
     else:
         fitted.shade(b, MAPPINGS[model_id], p, fit)
 

@@ -154,7 +154,8 @@ def describe(record: dict) -> str:
 def comparison_errors(model_id: str, p, shaders: dict, resolution: int = CHOICE_RESOLUTION,
                       albedo_samples: int = SCENE_ALBEDO_SAMPLES, furnace_width: int | None = CHOICE_FURNACE_WIDTH):
     """({label: {scene: rel RMSE}}, {scene: reference mean}) of each shader in ``shaders`` ({label: (form, Fit or
-    None)}) against the reference on the comparison scenes (``reference.scenes.comparison_scenes``)."""
+    None)}, or (form, Fit or None, params) for a shader of other parameters than ``p``, such as a cheaper variant)
+    against the reference of ``p`` on the comparison scenes (``reference.scenes.comparison_scenes``)."""
     from ..reference import metrics
     from ..reference import scenes as ref_scenes
 
@@ -163,8 +164,9 @@ def comparison_errors(model_id: str, p, shaders: dict, resolution: int = CHOICE_
         image = reference_image(model_id, p, spec, albedo_samples)
         mask = ref_scenes.scene_mask(spec)
         means[spec.name] = float(image[mask].mean())
-        for label, (form, fit) in shaders.items():
-            errors[label][spec.name] = metrics.rel_rmse(predicted_image(model_id, p, form, spec, fit), image, mask)
+        for label, (form, fit, *rendered) in shaders.items():
+            q = rendered[0] if rendered else p
+            errors[label][spec.name] = metrics.rel_rmse(predicted_image(model_id, q, form, spec, fit), image, mask)
     return errors, means
 
 

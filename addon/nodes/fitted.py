@@ -258,6 +258,8 @@ class Fit:
     groups: tuple = ()  # the atom of each rescaled closure, in recording order (``atom_groups``)
     driven: Driven | None = None
 
+    LABEL = "fitted"  # in the names of the shaders that carry the tables
+
     def to_json(self) -> dict:
         """Lists (a material keeps its fit: what it renders can be predicted anywhere); ``from_arrays`` reads
         them back."""

@@ -25,7 +25,7 @@ import numpy as np
 from ..bake.textures import BakeError
 from ..models import MODELS
 from ..models.micrograin import WRAPPED, Bulk
-from . import FORMS, MAPPING_KINDS, MAPPINGS, choice, fittable, fitted, image_values, osl, shade
+from . import FORMS, MAPPING_KINDS, MAPPINGS, choice, fittable, fitted, image_values, osl, pruning, shade
 from .expr import BULK_INPUT, TANGENT_INPUT, NumpyBackend, OslBackend
 from .node_backend import NodeBackend
 
@@ -49,7 +49,7 @@ def _label(model_id: str) -> str:
 
 
 def _base_name(model_id: str, p, fit=None) -> str:
-    return f"Lamina {_label(model_id)}{' fitted' if fit else ''} {content_hash(model_id, p, fit)}"
+    return f"Lamina {_label(model_id)}{' ' + fit.LABEL if fit else ''} {content_hash(model_id, p, fit)}"
 
 
 # ------------------------------------------------------------------------------------------ node group
@@ -449,15 +449,20 @@ def insert_layer(mat, model_id: str, p, form: str, surface) -> None:
     bake_constants(mat)
 
 
-def _rebuild(mat, model_id: str, p, form: str, mapping: str = "analytic", refit: bool = True) -> None:
+def _rebuild(mat, model_id: str, p, form: str, mapping: str = "analytic", refit: bool = True,
+             pruned: pruning.Pruned | None = None) -> None:
     """Choose the mapping (``plan``) and build the tree first (nothing is touched if that fails), then record the
     parameters, the choice and the bake. Without ``refit`` (a toggle that must not wait seconds for a fit), a fitted
-    or Auto material keeps the user's choice but renders analytic until Refit (its record is stale)."""
+    or Auto material keeps the user's choice but renders analytic until Refit (its record is stale). ``pruned``
+    (analytic mapping only): the closures left out (Fit to budget); any other rebuild builds them all again."""
     deferred = not refit and mapping != "analytic" and fittable(model_id)
     asked = Plan("analytic", note=DEFERRED_NOTE) if deferred else plan(mat, model_id, p, mapping)
     chosen = choice.choose(model_id, p, form, asked.mapping, asked.driven)
-    _build_tree(mat, model_id, p, form, chosen.fit)
-    mat["lamina"] = json.dumps({"model": model_id, "params": p.to_dict(), "mapping": mapping})
+    if pruned is not None and chosen.fit is not None:
+        raise ValueError("closures are left out of the analytic mapping only")
+    _build_tree(mat, model_id, p, form, pruned or chosen.fit)
+    mat["lamina"] = json.dumps({"model": model_id, "params": p.to_dict(), "mapping": mapping,
+                                **({"pruned": pruned.to_json()} if pruned else {})})
     if chosen.error or asked.note:
         held = current_params(mat)[1]  # the key of the values as the sockets hold them (float32), as bake_constants
         key = "" if deferred else choice.fit_key(model_id, held, form, asked.driven)  # "": stale, Refit
@@ -470,6 +475,33 @@ def _rebuild(mat, model_id: str, p, form: str, mapping: str = "analytic", refit:
     else:
         mat.pop(FIT_RECORD, None)
     bake_constants(mat)  # records the bake key of the values as the sockets hold them (float32)
+
+
+BUDGET_RECORD = "lamina_budget"  # the last Fit to budget's decision (``budget.Decision.to_json``; the panel reads it)
+
+
+def budget_record(mat) -> dict | None:
+    return json.loads(mat[BUDGET_RECORD]) if BUDGET_RECORD in mat.keys() else None
+
+
+def used_mapping(mat) -> str:
+    """The mapping the material renders with ("analytic" or "fitted"; Auto is one of the two)."""
+    record = fit_record(mat)
+    return record["used"] if record else "analytic"
+
+
+def pruned_of(mat) -> pruning.Pruned | None:
+    """The closures the material's Lamina node leaves out (Fit to budget), or None."""
+    data = info(mat).get("pruned")
+    return pruning.Pruned.from_json(data) if data else None
+
+
+def apply_decision(mat, decision) -> None:
+    """Rebuild the Lamina node in the configuration ``decision`` chose (``budget.Decision``: the variant's values,
+    form, mapping and the closures left out; the user's other nodes are untouched) and record the decision."""
+    chosen = decision.chosen
+    _rebuild(mat, info(mat)["model"], chosen.params, chosen.form, chosen.mapping, pruned=chosen.pruned)
+    mat[BUDGET_RECORD] = json.dumps(decision.to_json())
 
 
 # --------------------------------------------------------------------------------- multiple scattering

@@ -22,6 +22,8 @@ reference tabulates it. [approx: grain-transmittance-fit]
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 from ..models import micrograin as model
 from ..models.params import Param
 from ..reference.micrograin import lambda_scheme
@@ -56,6 +58,11 @@ APPROXIMATIONS = {
                                         grain={"type": "dielectric", "albedo": [0.8] * 3, "ior": 1.5},
                                         bulk={"type": "diffuse", "albedo": [0.0, 0.0, 0.0]})),
 }
+
+
+def cheaper_variants(p: model.Params) -> list[tuple[str, model.Params]]:
+    """What Fit to budget may build instead (``budget``): GGX's geometric term instead of the grains' series."""
+    return [("GGX geometric term", replace(p, gaf="ggx"))] if p.gaf == "series" else []
 
 
 def approximations_used(p: model.Params) -> list[str]:

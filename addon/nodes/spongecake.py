@@ -118,6 +118,11 @@ APPROXIMATIONS = {
 }
 
 
+def cheaper_variants(p: model.Params) -> list[tuple[str, model.Params]]:
+    """What Fit to budget may build instead (``budget``): the stack without its multiple-scattering lobes."""
+    return [("no multiple scattering", replace(p, multiple_scattering=False))] if p.multiple_scattering else []
+
+
 def approximations_used(p: model.Params) -> list[str]:
     """The names of the ``APPROXIMATIONS`` the mapping makes for ``p``, in that table's order (an approximation
     marked for Blender 4.2 is listed whenever its configuration occurs: it says so itself). The transmission

@@ -101,6 +101,11 @@ APPROXIMATIONS = {
 }
 
 
+def cheaper_variants(p: model.Params) -> list[tuple[str, model.Params]]:
+    """What Fit to budget may build instead (``budget``): fewer subsurface bounces."""
+    return [(f"{k} bounce{'s' * (k != 1)}", replace(p, bounces=k)) for k in range(p.bounces)]
+
+
 def approximations_used(p: model.Params) -> list[str]:
     """The names of the ``APPROXIMATIONS`` the mapping makes for ``p``, in that table's order (the Blender 4.2 one
     is listed for every coat: it says so itself)."""

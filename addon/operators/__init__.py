@@ -5,7 +5,7 @@ import importlib
 import bpy
 
 from ..models import REGISTRY
-from . import asset_library, bake_ops, compare_op, material_ops, ms_ops
+from . import asset_library, bake_ops, budget_ops, compare_op, material_ops, ms_ops
 
 MODEL_OPERATORS = {model_id: importlib.import_module(f".{model_id}", __name__) for model_id in REGISTRY}
 
@@ -17,6 +17,7 @@ classes = (
     ms_ops.LAMINA_OT_rebake,
     compare_op.LAMINA_OT_compare,
     bake_ops.LAMINA_OT_bake_textures,
+    *budget_ops.classes,
     *asset_library.classes,
 )
 
@@ -32,11 +33,13 @@ def register():
             bpy.utils.unregister_class(cls)
         raise
     bpy.types.WindowManager.lamina_compare = bpy.props.PointerProperty(type=compare_op.LaminaCompareSettings)
+    bpy.types.WindowManager.lamina_error_budget = budget_ops.budget_setting()
     ms_ops.register()
 
 
 def unregister():
     ms_ops.unregister()
+    del bpy.types.WindowManager.lamina_error_budget
     del bpy.types.WindowManager.lamina_compare
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

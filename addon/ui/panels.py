@@ -4,13 +4,14 @@ the operators of ``operators/<model id>.py``, both found through the model regis
 from __future__ import annotations
 
 import importlib
+import textwrap
 
 import bpy
 
 from ..models import MEDIA, MODELS, REGISTRY
 from ..nodes import fittable
 from ..nodes import material as lamina_material
-from ..operators import MODEL_OPERATORS, asset_library, compare_run
+from ..operators import MODEL_OPERATORS, asset_library, budget_ops, compare_run
 from ..operators.material_ops import MAPPING_ITEMS
 
 MODEL_UI = {model_id: importlib.import_module(f".{model_id}", __package__) for model_id in REGISTRY}
@@ -151,4 +152,36 @@ class LAMINA_PT_compare(bpy.types.Panel):
             layout.label(text=line)
 
 
-classes = (LAMINA_PT_main, LAMINA_PT_compare)
+class LAMINA_PT_budget(bpy.types.Panel):
+    bl_space_type = "NODE_EDITOR"
+    bl_region_type = "UI"
+    bl_category = "Lamina"
+    bl_label = "Fit to budget"
+    bl_parent_id = "LAMINA_PT_main"
+
+    @classmethod
+    def poll(cls, context):
+        mat = getattr(context, "material", None)
+        return lamina_material.is_lamina(mat) and lamina_material.info(mat)["model"] in MODELS
+
+    def draw(self, context):
+        layout = self.layout
+        mat = context.material
+        reason = budget_ops.refusal(mat)
+        row = layout.row(align=True)
+        row.enabled = reason is None
+        row.prop(context.window_manager, "lamina_error_budget", text="Budget")
+        row.operator("lamina.fit_to_budget", icon="SORTTIME").budget = context.window_manager.lamina_error_budget
+        if reason:
+            layout.label(text=reason, icon="INFO")
+        if not context.scene.cycles.shading_system:
+            layout.label(text="OSL is off in this scene: node groups only")
+        record = lamina_material.budget_record(mat)
+        if record is not None:
+            for line in textwrap.wrap(record["summary"], 48):
+                layout.label(text=line)
+            if budget_ops.is_stale(mat, record):
+                layout.label(text="Changed since: Fit to Budget again", icon="ERROR")
+
+
+classes = (LAMINA_PT_main, LAMINA_PT_compare, LAMINA_PT_budget)

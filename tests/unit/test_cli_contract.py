@@ -40,6 +40,9 @@ def fixtures(tmp_path_factory):
     (folder / "zero_medium.json").write_text(json.dumps({"sigma_s": [0.0, 0.0, 0.0], "sigma_a": [0.0, 0.0, 0.0]}))
     for name, data in ANISO_BAD.items():
         (folder / f"{name}.json").write_text(json.dumps(data))
+    plain = ("import bpy; bpy.ops.wm.read_factory_settings(use_empty=True); "
+             "bpy.data.materials.new('Plain').use_fake_user = True; bpy.ops.wm.save_as_mainfile(filepath='plain.blend')")
+    subprocess.run([sys.executable, "-c", plain], cwd=folder, check=True, capture_output=True, timeout=120)
     (folder / "results").mkdir()
     (folder / "results" / "report.json").write_text("{}")  # earlier results
     (folder / "empty").mkdir()
@@ -58,6 +61,7 @@ ANISO_BAD = {
 }
 
 MAKE = ("make-material", "--preset", "plastic")
+OPTIMIZE = ("optimize", "--blend", "in.blend", "--material", MATERIAL)
 COMPARE = ("compare", "--preset", "plastic", "--forms", "nodes", "--scenes", "sphere")
 COAT = ("--model", "thin_coat", "--preset", "amber_lacquer")
 BAKE = ("bake", "--blend", "in.blend", "--material", MATERIAL)
@@ -137,6 +141,7 @@ REFUSALS = [
     # bench
     (("bench", "--out", "text.txt"), "--out 'text.txt' is a file; expected a folder"),
     (("bench", "--out", "x", "--samples", "0"), "--samples must be ≥ 1, got 0"),
+    (("bench", "--out", "x", "--part", "speed"), "bench --part needs --model: a whole run writes both pages"),
     # bake
     (("bake", "--blend", "missing.blend", "--material", MATERIAL, "--out", "x.blend"),
      "--blend 'missing.blend' does not exist"),
@@ -151,6 +156,18 @@ REFUSALS = [
     (BAKE + ("--out", "in.blend"), "--out 'in.blend' exists; pass --overwrite"),
     (BAKE + ("--out", "empty"), "--out 'empty' is a folder"),
     (("bake", "--material", MATERIAL, "--out", "x.blend"), "the following arguments are required: --blend"),
+    # optimize
+    (OPTIMIZE + ("--budget", "0", "--out", "x.blend"), "--budget 0.0: expected a number > 0"),
+    (OPTIMIZE + ("--budget", "nan", "--out", "x.blend"), "--budget nan: expected a number > 0"),
+    (OPTIMIZE + ("--budget", "-0.1", "--out", "x.blend"), "--budget -0.1: expected a number > 0"),
+    (OPTIMIZE, "pass --out FILE, or --overwrite to save over --blend"),
+    (("optimize", "--blend", "in.blend", "--material", "Nope", "--out", "x.blend"),
+     "--material 'Nope': no such material in"),
+    (("optimize", "--blend", "plain.blend", "--material", "Plain", "--out", "x.blend"),
+     "--material 'Plain': not a Lamina material"),
+    (("optimize", "--blend", "plain.blend", "--all", "--out", "x.blend"), "--all: plain.blend has no Lamina material"),
+    (OPTIMIZE + ("--all", "--out", "x.blend"), "argument --all: not allowed with argument --material"),
+    (("optimize", "--blend", "corrupt.blend", "--all", "--out", "x.blend"), "Blender cannot read it"),
     # bake-medium
     (MEDIUM + ("--preset", "fluff", "--out", "x.blend"), "unknown neural_medium preset 'fluff'; available:"),
     (MEDIUM + ("--json", "zero_medium.json", "--out", "x.blend"), "zero density"),

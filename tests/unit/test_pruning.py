@@ -1,0 +1,79 @@
+"""Lobe pruning (``addon.nodes.pruning``): a pruned material renders its closures but the listed ones (what Cycles
+renders is linear in its closures), the sets offered leave out the weakest closures first and never more than
+``MAX_SHARE`` of the material's albedo, the cost counts only what feeds a closure, and Fit to budget keeps a pruned
+configuration only within the budget of the same configuration with every closure."""
+import numpy as np
+import pytest
+
+from addon import presets
+from addon.models import MODELS
+from addon.nodes import _backend, budget, predicted_eval, predicted_furnace, pruning
+
+
+def preset(model_id: str, name: str):
+    return MODELS[model_id].params_from_dict(presets.load(model_id, name))
+
+
+def directions(n: int, seed: int, upper: bool = False):
+    v = np.random.default_rng(seed).normal(size=(n, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    if upper:
+        v[:, 2] = np.abs(v[:, 2]) + 0.05
+        v /= np.linalg.norm(v, axis=1, keepdims=True)
+    return v
+
+
+@pytest.mark.parametrize("model_id, name", [("spongecake", "window_shade"), ("thin_coat", "varnished_metal"),
+                                            ("micrograin", "dust_on_wood")])
+@pytest.mark.parametrize("form", ["nodes", "osl"])
+def test_a_pruned_material_is_the_whole_less_the_closures_left_out(model_id, name, form):
+    p = preset(model_id, name)
+    n = len(pruning.call_kinds(model_id, p, form))
+    wi, wo = directions(200, 1), directions(200, 2, upper=True)
+    whole = predicted_eval(model_id, p, form)(wi, wo)
+    parts = sum(predicted_eval(model_id, p, form, pruning.Pruned(tuple(j for j in range(n) if j != i)))(wi, wo)
+                for i in range(n))
+    np.testing.assert_allclose(parts, whole, rtol=1e-9, atol=1e-12)
+    dropped = pruning.Pruned((n - 1,), ("last",))
+    assert _backend(model_id, p, form, wo[:1], dropped).closure_count() <= _backend(model_id, p, form,
+                                                                                    wo[:1]).closure_count()
+
+
+def test_the_sets_offered_are_nested_weakest_first_and_within_the_share():
+    p = preset("spongecake", "window_shade")
+    energy = pruning.lobe_energies("spongecake", p, "osl")
+    albedo = np.max(predicted_furnace("spongecake", p, "osl")(pruning.views()))
+    sets = pruning.prunable("spongecake", p, "osl")
+    assert len(sets) >= 2
+    for smaller, larger in zip(sets, sets[1:]):
+        assert set(smaller.calls) < set(larger.calls)
+    for s in sets:
+        assert energy[list(s.calls)].sum() <= pruning.MAX_SHARE * albedo
+        kept = [i for i in range(len(energy)) if i not in s.calls]
+        assert energy[list(s.calls)].max() <= energy[kept].min()
+    # a closure that carries nothing (a layer's zero diffuse share here) is the first to go, and costs no error
+    assert energy[list(sets[0].calls)].max() == 0.0
+
+
+def test_the_cost_counts_only_what_feeds_a_closure():
+    lines = ["float t1 = 1.0;", "float t2 = t1 * 2.0;", "float t3 = t1 + 5.0;", "color t4 = color(t2);"]
+    assert pruning.live_operations(lines, ["t4 * diffuse(N)"]) == 3
+    assert pruning.live_operations(lines, ["t3 * diffuse(N)", "t3 * translucent(N)"]) == 2
+    assert pruning.live_operations(lines, []) == 0
+    p = preset("thin_coat", "varnished_metal")
+    third = pruning.Pruned((2,), ("beckmann",))
+    (whole_ops, whole_closures), (ops, closures) = (budget.shader_size("thin_coat", p, "osl", fit)
+                                                    for fit in (None, third))
+    assert closures == whole_closures - 1 and ops < whole_ops
+
+
+def test_a_pruned_configuration_is_chosen_only_within_the_budget_of_its_whole():
+    p = preset("spongecake", "window_shade")
+    cands = budget.candidates("spongecake", p, ("osl",), mappings=("analytic",))
+    pruned = [c for c in cands if c.pruned]
+    assert pruned and all(c.change >= 0.0 for c in pruned)
+    free = [c for c in pruned if c.change < 1e-12]  # the zero-energy closures: nothing changes
+    assert free and all(c.seconds < next(w for w in cands if w.pruned is None).seconds for c in free)
+    for value in (1e-6, 0.01, 0.05, 0.2):
+        chosen = budget.pick(cands, value)
+        assert chosen.change <= value and chosen.error <= min(c.error for c in cands) + value
