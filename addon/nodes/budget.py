@@ -184,8 +184,9 @@ def candidates(model_id: str, p, forms, mappings=MAPPINGS_TRIED, prune: bool = T
                 shaders[(label, form, kind, pruned)] = (form, pruned, q)
         if progress:
             progress(0.8 * (i + 1) / len(configs))
-    errors, means = choice.comparison_errors(model_id, p, shaders)
-    changes = pruning_changes(model_id, shaders, means)
+    images = {}
+    errors, means = choice.comparison_errors(model_id, p, shaders, images=images)
+    changes = pruning_changes(shaders, images, means)
     out = []
     for key, (form, fit, q) in shaders.items():
         label, _, kind, pruned = key
@@ -198,24 +199,23 @@ def candidates(model_id: str, p, forms, mappings=MAPPINGS_TRIED, prune: bool = T
     return out
 
 
-def pruning_changes(model_id: str, shaders: dict, means: dict) -> dict:
+def pruning_changes(shaders: dict, images: dict, means: dict) -> dict:
     """{key: mean relative RMSE} of each pruned shader of ``shaders`` (``candidates``' keys and values) against the
-    same configuration with every closure, on the comparison scenes that count (``means``: the reference's)."""
+    same configuration with every closure, from their predicted ``images`` (``choice.comparison_errors``'), on the
+    comparison scenes that count (``means``: the reference's)."""
     from ..reference import metrics
     from ..reference import scenes as ref_scenes
-    from . import predicted_image
 
+    masks = {spec.name: ref_scenes.scene_mask(spec)
+             for spec in ref_scenes.comparison_scenes(choice.CHOICE_RESOLUTION, choice.CHOICE_FURNACE_WIDTH)}
     out = {}
-    for spec in ref_scenes.comparison_scenes(choice.CHOICE_RESOLUTION, choice.CHOICE_FURNACE_WIDTH):
-        mask, whole = ref_scenes.scene_mask(spec), {}
-        for key, (form, pruned, q) in shaders.items():
-            if isinstance(pruned, pruning.Pruned):
-                base = key[:3]
-                if base not in whole:
-                    whole[base] = predicted_image(model_id, q, form, spec)
-                error = metrics.rel_rmse(predicted_image(model_id, q, form, spec, pruned), whole[base], mask)
-                out.setdefault(key, {})[spec.name] = error
-    return {key: choice.counted(errors, means) for key, errors in out.items()}
+    for key, (_, pruned, _) in shaders.items():
+        if isinstance(pruned, pruning.Pruned):
+            whole = key[:3] + (None,)
+            errors = {scene: metrics.rel_rmse(images[(key, scene)], images[(whole, scene)], mask)
+                      for scene, mask in masks.items()}
+            out[key] = choice.counted(errors, means)
+    return out
 
 
 def pick(cands: list[Candidate], budget: float) -> Candidate:

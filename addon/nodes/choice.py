@@ -152,10 +152,12 @@ def describe(record: dict) -> str:
 
 
 def comparison_errors(model_id: str, p, shaders: dict, resolution: int = CHOICE_RESOLUTION,
-                      albedo_samples: int = SCENE_ALBEDO_SAMPLES, furnace_width: int | None = CHOICE_FURNACE_WIDTH):
+                      albedo_samples: int = SCENE_ALBEDO_SAMPLES, furnace_width: int | None = CHOICE_FURNACE_WIDTH,
+                      images: dict | None = None):
     """({label: {scene: rel RMSE}}, {scene: reference mean}) of each shader in ``shaders`` ({label: (form, Fit or
     None)}, or (form, Fit or None, params) for a shader of other parameters than ``p``, such as a cheaper variant)
-    against the reference of ``p`` on the comparison scenes (``reference.scenes.comparison_scenes``)."""
+    against the reference of ``p`` on the comparison scenes (``reference.scenes.comparison_scenes``); ``images``
+    receives each shader's predicted image by (label, scene name)."""
     from ..reference import metrics
     from ..reference import scenes as ref_scenes
 
@@ -165,8 +167,10 @@ def comparison_errors(model_id: str, p, shaders: dict, resolution: int = CHOICE_
         mask = ref_scenes.scene_mask(spec)
         means[spec.name] = float(image[mask].mean())
         for label, (form, fit, *rendered) in shaders.items():
-            q = rendered[0] if rendered else p
-            errors[label][spec.name] = metrics.rel_rmse(predicted_image(model_id, q, form, spec, fit), image, mask)
+            predicted = predicted_image(model_id, rendered[0] if rendered else p, form, spec, fit)
+            errors[label][spec.name] = metrics.rel_rmse(predicted, image, mask)
+            if images is not None:
+                images[(label, spec.name)] = predicted
     return errors, means
 
 
