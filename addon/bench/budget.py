@@ -29,14 +29,24 @@ MS_ON = ("fabric", "window_shade")  # SpongeCake presets also measured with mult
 REPEATS = 2  # renders per configuration (the fastest counts)
 
 
+FOUR_BOUNCES = "varnished_metal, 4 bounces"
+# Issue 16's render-cost goals: (material, the most its configuration at the default budget may cost, against what).
+# "principled": a Principled BSDF of about the same lobe count (``principled_material``); else a candidate's variant.
+GOALS = (("leaf", 1.2, "principled"), ("window_shade", 1.2, "principled"), (FOUR_BOUNCES, 1.2, "1 bounce"),
+         *((name, 1.3, "principled") for name in presets.names("micrograin")))
+
+
+def _preset(model_id: str, name: str):
+    return MODELS[model_id].params_from_dict(presets.load(model_id, name))
+
+
 def materials() -> list[tuple[str, str, object]]:
-    """(model id, name, params) of every preset, then the ``MS_ON`` presets with multiple scattering."""
-    out = [(model_id, name, MODELS[model_id].params_from_dict(presets.load(model_id, name)))
-           for model_id in MODELS for name in presets.names(model_id)]
-    sponge = MODELS["spongecake"]
-    return out + [("spongecake", f"{name} + MS",
-                   replace(sponge.params_from_dict(presets.load("spongecake", name)), multiple_scattering=True))
-                  for name in MS_ON]
+    """(model id, name, params) of every preset, then the ``MS_ON`` presets with multiple scattering and varnished
+    metal with 4 bounces (``GOALS``)."""
+    out = [(model_id, name, _preset(model_id, name)) for model_id in MODELS for name in presets.names(model_id)]
+    return out + [("spongecake", f"{name} + MS", replace(_preset("spongecake", name), multiple_scattering=True))
+                  for name in MS_ON] + [("thin_coat", FOUR_BOUNCES,
+                                         replace(_preset("thin_coat", "varnished_metal"), bounces=4))]
 
 
 def measured(entries, progress=print) -> dict:
@@ -50,14 +60,17 @@ def measured(entries, progress=print) -> dict:
 
 def render_seconds(cands: dict, samples: int, resolution: int, repeats: int) -> dict:
     """{(name, i): seconds} of the i-th candidate of each material of ``cands`` (``measured``) as Cycles renders
-    it (the OSL shading system on for every render, as the timing sphere of the presets' tables)."""
+    it, and {(name, "principled"): seconds} of its Principled BSDF of about the same lobe count (the OSL shading
+    system on for every render, as the timing sphere of the presets' tables)."""
+    from ..nodes import material as lamina_material
 
     def materials_of(name):
-        model_id, _, cs = cands[name]
-        return {i: configured(model_id, c) for i, c in enumerate(cs)}
+        model_id, p, cs = cands[name]
+        return {**{i: configured(model_id, c) for i, c in enumerate(cs)},
+                "principled": lamina_material.principled_material(model_id, p)}
 
     rows = fastest_renders(list(cands), materials_of, samples, resolution, repeats)
-    return {(row["preset"], i): row[i] for row in rows for i in range(len(cands[row["preset"]][2]))}
+    return {(row["preset"], label): seconds for row in rows for label, seconds in row.items() if label != "preset"}
 
 
 def configured(model_id: str, c: budget.Candidate):
@@ -107,16 +120,13 @@ def _coefficients(m: budget.CostModel) -> str:
     return f"{m.base:.2f} s + {1000 * m.per_operation:.2f} ms/op + {m.per_closure:.2f} s/closure"
 
 
-def _short(c: budget.Candidate) -> str:
-    return f"{FORM_LABELS[c.form]}, {c.mapping}, {c.variant}"
-
-
 def markdown(cands: dict, seconds: dict, samples: int, resolution: int, repeats: int) -> str:
     fitted = least_squares(cands, seconds)
     lines = ["", "## Fit to budget", "",
-             f"Every preset of every BSDF model (and {', '.join(MS_ON)} with multiple scattering) in each "
-             "configuration Fit to budget chooses among: both forms, each cheaper variant (thin-coat bounces, "
-             "multiple scattering off, GGX's geometric term), both mappings where the model has a fitted one. Cycles "
+             f"Every preset of every BSDF model (and {', '.join(MS_ON)} with multiple scattering, {FOUR_BOUNCES}) in "
+             "each configuration Fit to budget chooses among: both forms, each cheaper variant (thin-coat bounces, "
+             "multiple scattering off, GGX's geometric term), the weakest closures left out (analytic mapping), both "
+             "mappings where the model has a fitted one. Cycles "
              f"CPU render of the sphere scene, {resolution}×{resolution} px, {samples} samples, fastest of "
              f"{repeats}, the OSL shading system on.", "",
              "### Cost model", "",
@@ -141,10 +151,46 @@ def markdown(cands: dict, seconds: dict, samples: int, resolution: int, repeats:
         best = min(range(len(cs)), key=lambda i: cs[i].error)
         for b in BUDGETS:
             i = cs.index(budget.pick(cs, b))
-            lines.append(f"| {name} | {_short(cs[best])} ({pct(cs[best].error)}) | {100 * b:g}% | {_short(cs[i])} | "
-                         f"{pct(cs[i].error)} | {cs[i].seconds / cs[best].seconds:.2f} | "
+            lines.append(f"| {name} | {cs[best].describe()} ({pct(cs[best].error)}) | {100 * b:g}% | "
+                         f"{cs[i].describe()} | {pct(cs[i].error)} | {cs[i].seconds / cs[best].seconds:.2f} | "
                          f"{seconds[(name, i)] / seconds[(name, best)]:.2f} |")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + goals_table(cands, seconds)) + "\n"
+
+
+def _baseline(cands: dict, seconds: dict, name: str, against: str) -> float:
+    if against == "principled":
+        return seconds[(name, "principled")]
+    cs = cands[name][2]
+    return seconds[(name, next(i for i, c in enumerate(cs) if c.variant == against and c.form == "nodes"
+                               and c.mapping == "analytic" and c.pruned is None))]
+
+
+def goals_table(cands: dict, seconds: dict) -> list[str]:
+    """Issue 16's render-cost goals (``GOALS``): the most accurate configuration's time and the one chosen at the
+    default budget, against the goal's baseline measured in the same run."""
+    lines = ["", f"### Render-cost goals at the default budget ({100 * budget.DEFAULT_BUDGET:g}%)", "",
+             "Measured render time against the goal's baseline from the same run: a Principled BSDF of about the "
+             "same lobe count, or the same coat with 1 bounce (node group, analytic).", "",
+             "| material | goal | most accurate | chosen at the default budget | met |", "|---|---|---|---|---|"]
+    for name, goal, against in GOALS:
+        cs = cands[name][2]
+        base = _baseline(cands, seconds, name, against)
+        best = min(range(len(cs)), key=lambda i: cs[i].error)
+        i = cs.index(budget.pick(cs, budget.DEFAULT_BUDGET))
+        ratio = seconds[(name, i)] / base
+        within = [j for j, c in enumerate(cs) if c.error <= cs[best].error + budget.DEFAULT_BUDGET
+                  and c.change <= budget.DEFAULT_BUDGET]
+        fastest = min(within, key=lambda j: seconds[(name, j)])
+        fastest_ratio = seconds[(name, fastest)] / base
+        if ratio <= goal:
+            why = "met"
+        elif fastest_ratio <= goal:
+            why = f"not met: the cost model ranked this above {cs[fastest].describe()} ({fastest_ratio:.2f}×)"
+        else:
+            why = f"not met: no configuration within the budget renders within {goal:g}× here"
+        lines.append(f"| {name} | ≤ {goal:g}× {against} | {seconds[(name, best)] / base:.2f}× | "
+                     f"{cs[i].describe()}: {ratio:.2f}× | {why} |")
+    return lines
 
 
 def speed(sizes, repeats: int = REPEATS, progress=print) -> str:
@@ -159,7 +205,8 @@ def save(path: str, cands: dict, seconds: dict) -> None:
     from ..operators.compare_run import write_text_atomic
 
     data = {name: {"model": model_id, "candidates": [c.to_json() for c in cs],
-                   "seconds": [seconds[(name, i)] for i in range(len(cs))]}
+                   "seconds": [seconds[(name, i)] for i in range(len(cs))],
+                   "principled": seconds[(name, "principled")]}
             for name, (model_id, _, cs) in cands.items()}
     write_text_atomic(path, json.dumps(data))
 
@@ -172,6 +219,7 @@ def load(path: str) -> tuple[dict, dict]:
     for name, entry in data.items():
         cs = [budget.Candidate.from_json(entry["model"], c) for c in entry["candidates"]]
         seconds.update(((name, i), s) for i, s in enumerate(entry["seconds"]))
+        seconds[(name, "principled")] = entry["principled"]
         cands[name] = (entry["model"], cs[0].params, cs)
     return cands, seconds
 
