@@ -165,7 +165,7 @@ REFUSALS = [
      "--material 'Nope': no such material in"),
     (("optimize", "--blend", "plain.blend", "--material", "Plain", "--out", "x.blend"),
      "--material 'Plain': not a Lamina material"),
-    (("optimize", "--blend", "plain.blend", "--all", "--out", "x.blend"), "--all: plain.blend has no Lamina material"),
+    (("optimize", "--blend", "plain.blend", "--all", "--out", "x.blend"), "plain.blend has no Lamina material to fit"),
     (OPTIMIZE + ("--all", "--out", "x.blend"), "argument --all: not allowed with argument --material"),
     (("optimize", "--blend", "corrupt.blend", "--all", "--out", "x.blend"), "Blender cannot read it"),
     # bake-medium
