@@ -75,6 +75,9 @@ STACK = (
     Param("bounces", "Bounces", "int", 2, 0, MAX_BOUNCES,
           description="Subsurface reflections modelled (Sec. 5.2): 0 is the top interface alone; each adds a "
                       "lobe, the first carries most of the energy"),
+    Param("merge_orders", "Merge orders ≥ 2", "bool", False,
+          description="Cycles forms only: render the reflection (and slab transmission) orders from the second on "
+                      "as one lobe each, cheaper with 3-4 bounces; the reference keeps every order"),
 )
 
 
@@ -102,6 +105,7 @@ class Params:
     depth: float
     base: Base
     bounces: int = 2
+    merge_orders: bool = False
 
     @property
     def roughness_top(self) -> float:

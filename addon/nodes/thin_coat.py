@@ -65,6 +65,7 @@ BASE_PANEL = "Base"
 SLAB_IOR = 10.0  # the slab's refraction closures: relative IOR of the medium they pretend to enter
 MAX_LOBE_KAPPA = model.MAX_KAPPA  # α ≥ sqrt(2 / 1e6) for every lobe
 NEWTON_STEPS = {"osl": 2, "nodes": 0}  # refinements of Banerjee's inverse per form
+MERGED_FROM = 2  # merge_orders: the reflection and transmission orders from this one on become one lobe per kind
 
 
 def _config(**kw) -> dict:
@@ -95,6 +96,9 @@ APPROXIMATIONS = {
                                   base={"type": "diffuse", "albedo": [0.95, 0.95, 0.95]})),
     "kappa-without-newton": ("node group: the vMF inverse A3⁻¹ by Banerjee's approximation without Newton steps",
                              _config(kappa_top=1e6, kappa_bottom=45.0, bounces=1)),
+    "merged-orders": ("merge_orders: the reflection (and a slab's transmission) orders from the second on as one "
+                      "lobe per kind (summed weight, the concentration of their weighted mean cosine)",
+                      _config(kappa_top=1e6, kappa_bottom=30.0, bounces=4, merge_orders=True)),
     "transmission-as-refraction": ("a slab's transmitted vMF lobes as Beckmann refraction about the view at IOR 10 "
                                    "(the same energy)",
                                    _config(kappa_top=100.0, kappa_bottom=100.0, bounces=1, base={"type": "slab"})),
@@ -102,8 +106,13 @@ APPROXIMATIONS = {
 
 
 def cheaper_variants(p: model.Params) -> list[tuple[str, model.Params]]:
-    """What Fit to budget may build instead (``budget``): fewer subsurface bounces."""
-    return [(f"{k} bounce{'s' * (k != 1)}", replace(p, bounces=k)) for k in range(p.bounces)]
+    """What Fit to budget may build instead (``budget``): fewer subsurface bounces, and with more than
+    ``MERGED_FROM`` bounces the orders from ``MERGED_FROM`` on merged (``merged_orders``)."""
+    out = [(f"{k} bounce{'s' * (k != 1)}", replace(p, bounces=k)) for k in range(p.bounces)]
+    if not p.merge_orders and p.base.type != "diffuse":
+        out += [(f"{k} bounces, orders ≥ {MERGED_FROM} merged", replace(p, bounces=k, merge_orders=True))
+                for k in range(MERGED_FROM + 1, p.bounces + 1)]
+    return out
 
 
 def approximations_used(p: model.Params) -> list[str]:
@@ -119,6 +128,8 @@ def approximations_used(p: model.Params) -> list[str]:
         used |= {"endf-as-beckmann", "kappa-without-newton"}
     if p.transmits:
         used |= {"transmission-as-refraction", "kappa-without-newton"}
+    if p.merge_orders and p.base.type != "diffuse" and p.bounces > MERGED_FROM:
+        used.add("merged-orders")
     return [name for name in APPROXIMATIONS if name in used]
 
 
@@ -150,7 +161,7 @@ def sockets(p: model.Params) -> list[Socket]:
 
 
 def structure_key(p: model.Params) -> tuple:
-    return p.base.type, p.bounces
+    return p.base.type, p.bounces, p.merge_orders and p.bounces >= MERGED_FROM + 1
 
 
 def _is_base(p: model.Params, s: Socket) -> bool:
@@ -197,7 +208,8 @@ def shade(b, p: model.Params) -> None:
         inputs["albedo"] = b.input("Base Color", "color")
     k1 = inputs["kappa_top"]
     diffuse = None  # every order over a Lambertian base: one Diffuse closure (their sum, exact)
-    for lobe in reference.lobes(ops, replace(p, base=base), mu, 0, inputs):
+    lobes = reference.lobes(ops, replace(p, base=base), mu, 0, inputs)
+    for lobe in merged_orders(ops, lobes) if p.merge_orders else lobes:
         if lobe.kind == "surface":
             alpha = lobe_alpha(b, k1)
             g1 = reference.smith_g1(ops, mu, k1)
@@ -214,6 +226,31 @@ def shade(b, p: model.Params) -> None:
             b.beckmann_refraction(lobe.weight, alpha, SLAB_IOR, b.view())
     if diffuse is not None:
         b.diffuse(b.scale(diffuse * mean_entry(ops, eta, k1, sigma_d), np.pi))
+
+
+def merged_orders(ops, lobes: list) -> list:
+    """``lobes`` with the reflection and the transmission orders from ``MERGED_FROM`` on each merged into one lobe:
+    their summed weight, and the concentration whose mean cosine is their mean cosines' mean weighted by the weights'
+    grey (moment matching on 1 − A3, as the vMF convolution does). [approx: merged-orders]"""
+    out, merged = [], {}
+    for lobe in lobes:
+        if lobe.kind in ("reflection", "transmission") and lobe.order >= MERGED_FROM:
+            merged.setdefault(lobe.kind, []).append(lobe)
+        else:
+            out.append(lobe)
+    b = ops.b
+    for kind, group in merged.items():
+        weight, total, moment = group[0].weight, None, None
+        for lobe in group[1:]:
+            weight = weight + lobe.weight
+        for lobe in group:
+            grey = b.channel_mean(lobe.weight)
+            total = grey if total is None else total + grey
+            term = grey * ops.complement(lobe.kappa)
+            moment = term if moment is None else moment + term
+        kappa = group[0].kappa if len(group) == 1 else ops.kappa(moment / b.maximum(total, 1e-30))
+        out.append(reference.Lobe(kind, MERGED_FROM, weight, kappa))
+    return out
 
 
 # Gauss-Legendre nodes in v = cos²θ on [0, 1] for the cosine-weighted mean over the light's directions.

@@ -42,6 +42,8 @@ def declared(decl, param: str, **overrides):
     prm = next(p for p in decl if p.name == param)
     kw = {"name": prm.label, "default": prm.default, "description": prm.description,
           **{bound: getattr(prm, bound) for bound in ("min", "max") if getattr(prm, bound) is not None}}
+    if prm.kind == "bool":
+        return bpy.props.BoolProperty(**{**{k: v for k, v in kw.items() if k not in ("min", "max")}, **overrides})
     if prm.kind == "float":
         return bpy.props.FloatProperty(**({"subtype": prm.subtype} if prm.subtype else {}), **{**kw, **overrides})
     if prm.kind == "int":

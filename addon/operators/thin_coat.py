@@ -59,6 +59,7 @@ class LAMINA_OT_add_thin_coat(AddMaterialDialog, bpy.types.Operator):
     metal_ior: declared(thin_coat.BASE["conductor"], "eta", name="IOR n", default=METALS["aluminium"][0])
     metal_k: declared(thin_coat.BASE["conductor"], "k", name="Extinction k", default=METALS["aluminium"][1])
     bounces: declared(thin_coat.STACK, "bounces")
+    merge_orders: declared(thin_coat.STACK, "merge_orders")
 
     def draw(self, context):
         layout = self.layout
@@ -71,6 +72,7 @@ class LAMINA_OT_add_thin_coat(AddMaterialDialog, bpy.types.Operator):
         col.prop(self, "bounces")
         col.label(text="0: the top interface only (fastest); each bounce adds a lobe,", icon="INFO")
         col.label(text="the first carries most of the energy: 2 is usually enough")
+        col.prop(self, "merge_orders")
         layout.row().prop(self, "form", expand=True)
         layout.row().prop(self, "mapping", expand=True)
 
@@ -111,7 +113,8 @@ class LAMINA_OT_add_thin_coat(AddMaterialDialog, bpy.types.Operator):
             draw_conductor(col, self, "metal")
 
     def coat_dict(self) -> dict:
-        """The thin-coat dict the dialog describes (a preset's or the Custom settings) with the dialog's bounces."""
+        """The thin-coat dict the dialog describes (a preset's or the Custom settings) with the dialog's bounces and
+        order merging."""
         if self.preset != CUSTOM:
             data = presets.load(thin_coat.ID, self.preset)
         else:
@@ -127,7 +130,7 @@ class LAMINA_OT_add_thin_coat(AddMaterialDialog, bpy.types.Operator):
                 base["eta"], base["k"] = list(ior), list(k)
             data["base"] = base
         data = {k: v for k, v in data.items() if k not in ("name", "description")}
-        return {**data, "bounces": self.bounces}
+        return {**data, "bounces": self.bounces, "merge_orders": self.merge_orders}
 
     def execute(self, context):
         name = f"{thin_coat.LABEL} {label(self.preset)}" if self.preset != CUSTOM else thin_coat.LABEL

@@ -30,6 +30,8 @@ def draw_summary(box, mat, p, node) -> None:
     else:
         col.label(text=f"Absorption σa·d: ({', '.join(f'{s * p.depth:.3g}' for s in p.sigma_a)})")
     col.label(text=f"Bounces: {p.bounces} (subsurface reflections; 0 = the top interface only)")
+    if p.merge_orders:
+        col.label(text="Orders ≥ 2 merged into one lobe (Cycles forms)")
     if linked:
         col.label(text="Texture-driven: " + ", ".join(s.name for s in linked), icon="TEXTURE")
     elif node is not None:

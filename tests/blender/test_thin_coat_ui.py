@@ -36,6 +36,7 @@ def test_the_dialog_properties_come_from_the_declaration(registered):
     rna = bpy.ops.lamina.add_thin_coat.get_rna_type().properties
     bounces = rna["bounces"]
     assert bounces.type == "INT" and (bounces.hard_min, bounces.hard_max, bounces.default) == (0, 4, 2)
+    assert rna["merge_orders"].type == "BOOLEAN" and rna["merge_orders"].default is False
     eta = rna["eta"]
     assert (eta.hard_min, eta.hard_max, eta.default) == pytest.approx((1.0001, 3.0, 1.5))
     top = rna["roughness_top"]
@@ -78,7 +79,8 @@ def test_presets_load_with_their_description_and_the_dialogs_bounces(registered,
     ns = _dialog(registered, preset=name, bounces=1)
     data = OP.coat_dict(ns)
     expected = {k: v for k, v in presets.load(model.ID, name).items() if k != "description"}
-    assert data == {**expected, "bounces": 1}
+    assert data == {**expected, "bounces": 1, "merge_orders": False}
+    assert model.params_from_dict(OP.coat_dict(_dialog(registered, preset=name, merge_orders=True))).merge_orders
     text = _draw(ns)
     p = model.params_from_dict(data)
     assert presets.description(model.ID, name) in text
