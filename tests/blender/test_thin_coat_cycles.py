@@ -30,6 +30,8 @@ SLABS = {
     "slab": {"kappa_top": 100, "kappa_bottom": 100, "bounces": 1, "base": {"type": "slab"}},
     "rough_tinted_slab": {"kappa_top": 10, "kappa_bottom": 30, "bounces": 2, "sigma_a": [0.5, 0.2, 0.1],
                           "base": {"type": "slab"}},
+    "merged_orders_slab": {"kappa_top": 30, "kappa_bottom": 30, "bounces": 4, "merge_orders": True,
+                           "base": {"type": "slab"}},
 }
 
 
