@@ -111,12 +111,16 @@ def _draw_summary(box, mat, model_ui) -> None:
         box.label(text="The Lamina node was removed: showing the stored values", icon="ERROR")
 
 
-class LAMINA_PT_compare(bpy.types.Panel):
+class LaminaSubpanel:
+    """Where the Lamina panel's sub-panels live."""
     bl_space_type = "NODE_EDITOR"
     bl_region_type = "UI"
     bl_category = "Lamina"
-    bl_label = "Compare with reference"
     bl_parent_id = "LAMINA_PT_main"
+
+
+class LAMINA_PT_compare(LaminaSubpanel, bpy.types.Panel):
+    bl_label = "Compare with reference"
 
     @classmethod
     def poll(cls, context):
@@ -152,12 +156,8 @@ class LAMINA_PT_compare(bpy.types.Panel):
             layout.label(text=line)
 
 
-class LAMINA_PT_budget(bpy.types.Panel):
-    bl_space_type = "NODE_EDITOR"
-    bl_region_type = "UI"
-    bl_category = "Lamina"
+class LAMINA_PT_budget(LaminaSubpanel, bpy.types.Panel):
     bl_label = "Fit to budget"
-    bl_parent_id = "LAMINA_PT_main"
 
     @classmethod
     def poll(cls, context):
