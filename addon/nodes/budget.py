@@ -59,13 +59,12 @@ class CostModel:
 
 # Least squares over every preset's configurations, measured by ``python -m addon.bench.cost`` (docs/benchmarks.md,
 # "Cost model", which also reports how well these coefficients rank the measured times).
-COST = {"nodes": CostModel(1.2, 0.010, 0.45), "osl": CostModel(1.2, 0.004, 0.45)}
+COST = {"nodes": CostModel(3.65, 0.0228, 0.351), "osl": CostModel(2.33, 0.00428, 0.518)}
 
 
 def shader_size(model_id: str, p, form: str, fit=None) -> tuple[int, int]:
     """(arithmetic operations, closures) of the shader of ``p`` in ``form`` (``fit``: ``nodes.shade``'s), with those
-    of the reference bulk under a porous layer; operations that feed no closure are not counted (Cycles does not
-    evaluate them)."""
+    of the reference bulk under a porous layer; operations that feed no closure are not counted (``pruning``)."""
     import numpy as np
 
     from . import _backend, shade

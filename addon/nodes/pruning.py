@@ -1,9 +1,11 @@
 """Lobe pruning (issue 16; bpy-free): closures of a material's analytic mapping left out of both forms.
 
 A mapping's ``shade`` calls closure methods on its backend in a fixed order. ``Pruned(calls)`` names the calls (their
-indices in that order) that ``PrunedBackend`` drops; everything else passes through, and what only fed a dropped
-closure is dead code that Cycles does not evaluate (its shader graph keeps what reaches the output; OSL's optimiser
-removes the rest: ``live_operations`` counts what remains). ``lobe_energies`` measures what each call carries: its
+indices in that order) that ``PrunedBackend`` drops; everything else passes through. What only fed a dropped closure
+stays in the shader as dead code; the cost model counts only ``live_operations``, an assumption that
+docs/benchmarks.md's Fit-to-budget tables measure (a pruned anisotropic stack whose live operations fall by two thirds
+renders about as fast as the whole: Cycles appears to evaluate the dead nodes). ``lobe_energies`` measures what each
+call carries: its
 directional albedo (the largest channel) at ``VIEWS``, the most light a material without it loses from a view.
 ``prunable`` offers nested sets of the weakest calls while the energy left out stays within ``MAX_SHARE`` of the
 material's albedo; Fit to budget (``budget``) measures each against the reference and keeps one only within budget.
