@@ -66,14 +66,14 @@ def draw_dialog(cls, ns, methods) -> list:
 
 
 def panel_log(context_material) -> list:
-    """What the Lamina panels draw for ``context_material`` (the compare panel where its poll allows)."""
+    """What the Lamina panels draw for ``context_material`` (the sub-panels where their poll allows, as in Blender)."""
     from addon.ui import panels
 
     log = []
     context = SimpleNamespace(material=context_material, scene=bpy.context.scene,
                               window_manager=bpy.context.window_manager, active_object=bpy.context.active_object)
     for cls in panels.classes:
-        if cls is panels.LAMINA_PT_compare and not cls.poll(context):
+        if issubclass(cls, panels.LaminaSubpanel) and not cls.poll(context):
             continue
         cls.draw(SimpleNamespace(layout=Layout(log)), context)
     return log
