@@ -122,6 +122,9 @@ def build_parser() -> argparse.ArgumentParser:
     op.add_argument("--budget", type=float, default=DEFAULT_BUDGET,
                     help="relative RMSE allowed above the most accurate configuration (default %(default)g); OSL "
                          "forms are candidates only where every scene of the file renders OSL")
+    op.add_argument("--view", default="scenes", choices=("scenes", "camera"),
+                    help="measure on the comparison scenes, or on the points of each material's objects that the "
+                         "scene's active camera sees (a material it does not see: on the comparison scenes)")
     _blend_output_args(op)
 
     ad = sub.add_parser("add-porous", help="add a micrograin porous layer (dust, rust, ...) over a material of a "
@@ -460,7 +463,7 @@ def cmd_optimize(args) -> int:
     from .operators import blend_io, budget_ops
 
     try:
-        lines = budget_ops.optimize_file(blend, args.material or [], value, out)
+        lines = budget_ops.optimize_file(blend, args.material or [], value, out, camera=args.view == "camera")
     except blend_io.BlendArgumentError as e:
         raise CliError(str(e)) from None
     for line in lines:

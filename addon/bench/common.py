@@ -11,7 +11,7 @@ import time
 import numpy as np
 
 from .. import presets
-from ..nodes import choice, fittable
+from ..nodes import budget, choice, fittable
 from ..nodes.choice import comparison_errors
 from ..reference import scenes as ref_scenes
 from ..reference.scenes import ACCURACY_SCENES, comparison_scenes  # noqa: F401 (the models' bench modules use them)
@@ -88,9 +88,9 @@ def mapping_section(model, resolution: int) -> list[str]:
                 start = time.perf_counter()
                 chosen[form] = choice.choose(model.ID, p, form, "auto")
                 fit = choice.choose(model.ID, p, form, "fitted").fit
-                summary.append(f"| {name} | {form} | {chosen[form].used} | {_closures(model.ID, p, form, None)} → "
-                               f"{_closures(model.ID, p, form, fit)} | {fit_seconds:.1f} | "
-                               f"{time.perf_counter() - start:.1f} |")
+                closures = [budget.shader_size(model.ID, p, form, f)[1] for f in (None, fit)]
+                summary.append(f"| {name} | {form} | {chosen[form].used} | {closures[0]} → {closures[1]} | "
+                               f"{fit_seconds:.1f} | {time.perf_counter() - start:.1f} |")
             shaders = {f"{form} {m}": (form, chosen[form].fit if m == "auto" else None)
                        for form in ("osl", "nodes") for m in ("analytic", "auto")}
             errors, means = comparison_errors(model.ID, p, shaders, resolution, ALBEDO_SAMPLES, furnace_width=None)
@@ -135,12 +135,6 @@ def _goal(scene: str, mean: float, *errors) -> str:
     if mean < choice.BACKLIT_MIN_MEAN:
         return "n/a"
     return "met" if max(errors) <= GOALS[scene] else "not met"
-
-
-def _closures(model_id: str, p, form: str, fit) -> int:
-    from ..nodes import _backend
-
-    return _backend(model_id, p, form, np.array([[0.0, 0.0, 1.0]]), fit).closure_count()
 
 
 @contextlib.contextmanager

@@ -6,9 +6,10 @@ already renders it: Lamina never turns OSL on), a mapping (analytic, or fitted w
 and the material itself or one of its cheaper variants (``cheaper_variants`` of the model's mapping module: fewer
 thin-coat bounces, multiple scattering off, GGX's geometric term under a porous layer). Every configuration is
 measured with the numpy prediction of what Cycles renders against the reference of the material *as it is set*
-(``choice.comparison_errors``: the comparison scenes, no render) and priced by the cost model (``cost``). The budget
-is added to the lowest error of all configurations, so the most accurate one always qualifies; the cheapest
-qualifying one is chosen (on equal cost, the closer one).
+(``choice.comparison_errors``: the comparison scenes, or the points a camera sees, ``CameraView``; no render) and
+priced by the cost model (``COST`` of ``shader_size``). The budget is added to the lowest error of all
+configurations, so the most accurate one always qualifies; the cheapest qualifying one is chosen (on equal cost, the
+closer one).
 
 Texture-driven and keyframed inputs are measured at the values the sockets hold; applying a fitted configuration
 fits it over the driven range as the mapping switch does (``material.plan``).
@@ -57,30 +58,28 @@ class CostModel:
         return self.base + self.per_operation * operations + self.per_closure * closures
 
 
-# Least squares over every preset's configurations, measured by ``python -m addon.bench.cost`` (docs/benchmarks.md,
+# Least squares over every preset's configurations, measured by ``python -m addon.bench.budget`` (docs/benchmarks.md,
 # "Cost model", which also reports how well these coefficients rank the measured times).
-COST = {"nodes": CostModel(3.65, 0.0228, 0.351), "osl": CostModel(2.33, 0.00428, 0.518)}
+COST = {"nodes": CostModel(1.81, 0.0172, 0.582), "osl": CostModel(2.12, 0.00191, 0.466)}
 
 
 def shader_size(model_id: str, p, form: str, fit=None) -> tuple[int, int]:
     """(arithmetic operations, closures) of the shader of ``p`` in ``form`` (``fit``: ``nodes.shade``'s), with those
-    of the reference bulk under a porous layer; operations that feed no closure are not counted (``pruning``)."""
+    of the reference bulk under a porous layer. The operations are the temporaries of the OSL code that ``form``'s
+    branches write (``expr.OslBackend``) that feed a closure (``pruning.live_operations``): Cycles leaves out nodes
+    that reach no output, and OSL's optimiser dead code."""
     import numpy as np
 
     from . import _backend, shade
     from .expr import OslBackend
 
     mapping = MAPPINGS[model_id]
-    osl = OslBackend([(s.name, s.kind, s.param.default) for s in mapping.sockets(p)])
+    osl = OslBackend([(s.name, s.kind, s.param.default) for s in mapping.sockets(p)], form)
     shade(osl, model_id, p, fit)
     outputs = osl.closures + [color for colors in osl.lamberts.values() for color in colors]
     inner = mapping.bulk_shader(p) if hasattr(mapping, "bulk_shader") else None
     operations = pruning.live_operations(osl.lines, outputs) + (shader_size(*inner, form)[0] if inner else 0)
     return operations, _backend(model_id, p, form, np.array([[0.0, 0.0, 1.0]]), fit).closure_count()
-
-
-def predicted_seconds(model_id: str, p, form: str, fit=None) -> float:
-    return COST[form].seconds(*shader_size(model_id, p, form, fit))
 
 
 # ------------------------------------------------------------------------------------------------ candidates
@@ -120,6 +119,25 @@ class Candidate:
                       "pruned": pruned})
 
 
+@dataclass(frozen=True)
+class CameraView:
+    """The points of an object that a camera sees (``frames``: per point the world normal, tangent, bitangent and
+    the direction towards the camera, 12 floats) and the direction towards a key light (``key_light``)."""
+    frames: tuple
+    key_light: tuple
+
+    def scenes(self) -> list:
+        from ..reference import scenes as ref_scenes
+
+        return ref_scenes.view_scenes(self.frames, self.key_light)
+
+    def describe(self) -> str:
+        return f"the camera's view ({len(self.frames)} points)"
+
+
+COMPARISON_SCENES = "the comparison scenes"  # what a Decision was measured on, unless on a CameraView
+
+
 @dataclass
 class Decision:
     """The configuration chosen within ``budget`` among ``candidates`` of the material ``target`` (as set, the
@@ -130,6 +148,7 @@ class Decision:
     chosen: Candidate
     candidates: list[Candidate] = field(default_factory=list)
     current: Candidate | None = None
+    measured_on: str = COMPARISON_SCENES
 
     @property
     def best_error(self) -> float:
@@ -140,12 +159,12 @@ class Decision:
                 if self.current is not None else "")
         left_out = (f"; the closures left out change it by {100 * self.chosen.change:.1f}%" if self.chosen.pruned
                     else "")
-        return (f"{self.chosen.describe()}: predicted error {100 * self.chosen.error:.1f}% (the most accurate "
-                f"{100 * self.best_error:.1f}%, budget +{100 * self.budget:g}%){cost}{left_out}")
+        return (f"{self.chosen.describe()}: predicted error {100 * self.chosen.error:.1f}% on {self.measured_on} "
+                f"(the most accurate {100 * self.best_error:.1f}%, budget +{100 * self.budget:g}%){cost}{left_out}")
 
     def to_json(self) -> dict:
         return {"budget": self.budget, "target": self.target.to_dict(), "chosen": self.chosen.to_json(),
-                "best_error": self.best_error,
+                "best_error": self.best_error, "measured_on": self.measured_on,
                 "current": self.current and self.current.to_json(), "summary": self.summary(),
                 "candidates": [c.to_json() for c in self.candidates]}
 
@@ -168,10 +187,14 @@ def variants(model_id: str, p) -> list[tuple[str, object]]:
 
 
 def candidates(model_id: str, p, forms, mappings=MAPPINGS_TRIED, prune: bool = True,
-               progress=None) -> list[Candidate]:
+               progress=None, scenes=None) -> list[Candidate]:
     """Every configuration of ``p`` in ``forms`` with ``mappings`` (the fitted one where the model has it) and, with
-    ``prune``, the analytic mapping's prunable closures left out (``pruning.prunable``), measured and priced;
-    ``progress(fraction)`` after each configuration is set up."""
+    ``prune``, the analytic mapping's prunable closures left out (``pruning.prunable``), measured on the comparison
+    scenes (or ``scenes``: ``reference.scenes.view_scenes`` of a camera's view) and priced; ``progress(fraction)``
+    after each configuration is set up."""
+    from ..reference import scenes as ref_scenes
+
+    scenes = scenes or ref_scenes.comparison_scenes(choice.CHOICE_RESOLUTION, choice.CHOICE_FURNACE_WIDTH)
     kinds = [m for m in mappings if m == "analytic" or fittable(model_id)]
     configs = [(label, q, form, kind) for label, q in variants(model_id, p) for form in forms for kind in kinds]
     shaders = {}
@@ -184,8 +207,8 @@ def candidates(model_id: str, p, forms, mappings=MAPPINGS_TRIED, prune: bool = T
         if progress:
             progress(0.8 * (i + 1) / len(configs))
     images = {}
-    errors, means = choice.comparison_errors(model_id, p, shaders, images=images)
-    changes = pruning_changes(shaders, images, means)
+    errors, means = choice.comparison_errors(model_id, p, shaders, images=images, scenes=scenes)
+    changes = pruning_changes(shaders, images, means, scenes)
     out = []
     for key, (form, fit, q) in shaders.items():
         label, _, kind, pruned = key
@@ -198,15 +221,14 @@ def candidates(model_id: str, p, forms, mappings=MAPPINGS_TRIED, prune: bool = T
     return out
 
 
-def pruning_changes(shaders: dict, images: dict, means: dict) -> dict:
+def pruning_changes(shaders: dict, images: dict, means: dict, scenes) -> dict:
     """{key: mean relative RMSE} of each pruned shader of ``shaders`` (``candidates``' keys and values) against the
     same configuration with every closure, from their predicted ``images`` (``choice.comparison_errors``'), on the
-    comparison scenes that count (``means``: the reference's)."""
+    ``scenes`` that count (``means``: the reference's)."""
     from ..reference import metrics
     from ..reference import scenes as ref_scenes
 
-    masks = {spec.name: ref_scenes.scene_mask(spec)
-             for spec in ref_scenes.comparison_scenes(choice.CHOICE_RESOLUTION, choice.CHOICE_FURNACE_WIDTH)}
+    masks = {spec.name: ref_scenes.scene_mask(spec) for spec in scenes}
     out = {}
     for key, (_, pruned, _) in shaders.items():
         if isinstance(pruned, pruning.Pruned):
@@ -226,12 +248,14 @@ def pick(cands: list[Candidate], budget: float) -> Candidate:
 
 
 def fit_to_budget(model_id: str, p, budget: float = DEFAULT_BUDGET, forms=("nodes",), current=None,
-                  mappings=MAPPINGS_TRIED, progress=None) -> Decision:
-    """The ``Decision`` for the material ``p`` (as set: ``target``) within ``budget`` (``checked_budget``);
-    ``current``: (params, form, mapping, pruned) the material renders with now."""
+                  mappings=MAPPINGS_TRIED, progress=None, view: CameraView | None = None) -> Decision:
+    """The ``Decision`` for the material ``p`` (as set: ``target``) within ``budget`` (``checked_budget``), measured
+    on the comparison scenes or on a camera's ``view``; ``current``: (params, form, mapping, pruned) the material
+    renders with now."""
     budget = checked_budget(budget)
-    cands = candidates(model_id, p, forms, mappings, progress)
-    return Decision(budget, p, pick(cands, budget), cands, _matching(cands, current))
+    cands = candidates(model_id, p, forms, mappings, progress=progress, scenes=view and view.scenes())
+    return Decision(budget, p, pick(cands, budget), cands, _matching(cands, current),
+                    view.describe() if view else COMPARISON_SCENES)
 
 
 def _matching(cands: list[Candidate], current) -> Candidate | None:

@@ -153,16 +153,16 @@ def describe(record: dict) -> str:
 
 def comparison_errors(model_id: str, p, shaders: dict, resolution: int = CHOICE_RESOLUTION,
                       albedo_samples: int = SCENE_ALBEDO_SAMPLES, furnace_width: int | None = CHOICE_FURNACE_WIDTH,
-                      images: dict | None = None):
+                      images: dict | None = None, scenes=None):
     """({label: {scene: rel RMSE}}, {scene: reference mean}) of each shader in ``shaders`` ({label: (form, Fit or
     None)}, or (form, Fit or None, params) for a shader of other parameters than ``p``, such as a cheaper variant)
-    against the reference of ``p`` on the comparison scenes (``reference.scenes.comparison_scenes``); ``images``
-    receives each shader's predicted image by (label, scene name)."""
+    against the reference of ``p`` on the comparison scenes (``reference.scenes.comparison_scenes``, or ``scenes``
+    when given); ``images`` receives each shader's predicted image by (label, scene name)."""
     from ..reference import metrics
     from ..reference import scenes as ref_scenes
 
     errors, means = {label: {} for label in shaders}, {}
-    for spec in ref_scenes.comparison_scenes(resolution, furnace_width):
+    for spec in scenes or ref_scenes.comparison_scenes(resolution, furnace_width):
         image = reference_image(model_id, p, spec, albedo_samples)
         mask = ref_scenes.scene_mask(spec)
         means[spec.name] = float(image[mask].mean())

@@ -306,12 +306,15 @@ class OslBackend:
 
     In Cycles' OSL, ``I`` points from the surface towards the viewer (its Layer Weight shader uses
     dot(I, N) as the facing cosine), so ωo = I.
+
+    ``form`` "nodes" takes the node group's branches instead (``metal_min_ratio``, Schlick's Fresnel at the view), so
+    that the node group's arithmetic can be counted in the same terms (``nodes.budget.shader_size``); that code is
+    never compiled.
     """
 
-    form = "osl"
-
-    def __init__(self, params: list[tuple[str, str, object]]):
+    def __init__(self, params: list[tuple[str, str, object]], form: str = "osl"):
         self.params = params  # (osl name, kind, default)
+        self.form = form
         self.lines: list[str] = []
         self.closures: list[str] = []
         self.lamberts: dict[str, list[str]] = {}  # closure call -> the colours summed into it (``_lambert``)
@@ -436,6 +439,8 @@ class OslBackend:
         self.closures.append(f"{_osl(color).code} * {call}")
 
     def glossy(self, color, alpha_x, alpha_y, normal, tangent=None, f0=None):
+        if f0 is not None and self.form == "nodes":
+            color, f0 = schlick_at_view(self, color, f0, normal), None
         ax, ay, t = _osl(alpha_x).code, _osl(alpha_y).code, "Tn" if tangent is None else tangent.code
         if f0 is None:
             self._closure(color, f'microfacet("ggx", {normal.code}, {t}, {ax}, {ay}, 1.0, 0)')
@@ -443,7 +448,9 @@ class OslBackend:
             self._closure(1.0, f'generalized_schlick_bsdf({normal.code}, {t}, {_osl(color).code}, color(0), '
                                f'{ax}, {ay}, {_osl(f0).code}, color(1), 5.0, "ggx")')
 
-    metal_min_ratio = 0.0
+    @property
+    def metal_min_ratio(self) -> float:
+        return METAL_MIN_RATIO if self.form == "nodes" else 0.0
 
     def metal(self, alpha_x, alpha_y, tangent, eta, k, weight=1.0):
         """A constant extinction 0 is a dielectric: ``dielectric_bsdf`` without transmission, one per distinct IOR

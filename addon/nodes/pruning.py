@@ -1,14 +1,14 @@
 """Lobe pruning (issue 16; bpy-free): closures of a material's analytic mapping left out of both forms.
 
-A mapping's ``shade`` calls closure methods on its backend in a fixed order. ``Pruned(calls)`` names the calls (their
-indices in that order) that ``PrunedBackend`` drops; everything else passes through. What only fed a dropped closure
-stays in the shader as dead code; the cost model counts only ``live_operations``, an assumption that
-docs/benchmarks.md's Fit-to-budget tables measure (a pruned anisotropic stack whose live operations fall by two thirds
-renders about as fast as the whole: Cycles appears to evaluate the dead nodes). ``lobe_energies`` measures what each
-call carries: its
-directional albedo (the largest channel) at ``VIEWS``, the most light a material without it loses from a view.
-``prunable`` offers nested sets of the weakest calls while the energy left out stays within ``MAX_SHARE`` of the
-material's albedo; Fit to budget (``budget``) measures each against the reference and keeps one only within budget.
+A mapping's ``shade`` calls closure methods on its backend in a fixed order, which may differ between the forms
+(an anisotropic stack's node group adds a lobe where the Metallic BSDF cannot be as anisotropic), so a ``Pruned``
+belongs to one form. ``Pruned(calls)`` names the calls (their indices in that order) that ``PrunedBackend`` drops;
+everything else passes through. What only fed a dropped closure stays in the shader as dead code, which Cycles and
+OSL's optimiser leave out: the cost model counts only ``live_operations``. ``lobe_energies`` measures what each call
+carries: its directional albedo (the largest channel) at ``VIEWS``, the most light a material without it loses from
+a view. ``prunable`` offers nested sets of the weakest calls while the energy left out stays within ``MAX_SHARE`` of
+the material's albedo; Fit to budget (``budget``) measures each against the reference and keeps one only within
+budget.
 """
 from __future__ import annotations
 

@@ -34,11 +34,13 @@ def register():
         raise
     bpy.types.WindowManager.lamina_compare = bpy.props.PointerProperty(type=compare_op.LaminaCompareSettings)
     bpy.types.WindowManager.lamina_error_budget = budget_ops.budget_setting()
+    bpy.types.WindowManager.lamina_budget_view = budget_ops.view_setting()
     ms_ops.register()
 
 
 def unregister():
     ms_ops.unregister()
+    del bpy.types.WindowManager.lamina_budget_view
     del bpy.types.WindowManager.lamina_error_budget
     del bpy.types.WindowManager.lamina_compare
     for cls in reversed(classes):

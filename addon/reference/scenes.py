@@ -51,6 +51,10 @@ Scene kinds
             is the directional albedo a(wo) = integral over the whole sphere of f |cos theta_i| (reflection
             plus transmission). Cycles renders it with world colour 1 / strength 1 and max_bounces 0: the
             camera ray hits the plane and the world is sampled as a light (MIS with the BSDF).
+``views``   Not rendered by Cycles: the points of an object that a camera sees (``frames``: per point the
+            world normal, tangent, bitangent and wo), one pixel each in a 1-row image, lit as the panoramas
+            are (nothing occludes either hemisphere). ``view_scenes`` makes a key-lit and a furnace-lit pair
+            of them (Fit to budget's measure on the active camera's view of the object).
 """
 from __future__ import annotations
 
@@ -63,10 +67,11 @@ import numpy as np
 __all__ = [
     "Sun", "Scene", "KINDS", "NOTES", "sun_direction", "sphere_scene", "plane_scene", "backlit_scene",
     "furnace_scene", "default_scenes", "pixel_geometry", "scene_mask", "reference_image",
-    "directional_albedo", "lobe_view", "uv_sphere_mesh", "plane_half_size", "to_local",
+    "directional_albedo", "lobe_view", "uv_sphere_mesh", "plane_half_size", "to_local", "VIEWS", "view_scenes",
 ]
 
-KINDS = ("sphere", "plane", "backlit", "furnace")
+KINDS = ("sphere", "plane", "backlit", "furnace")  # the kinds Cycles renders
+VIEWS = "views"  # the kind of ``view_scenes``: the numpy reference and predictions only
 # What each kind of scene shows, in one sentence for people reading a comparison (the demo's report).
 NOTES = {
     "sphere": "A sphere under one sun 45° up, seen from straight above: the material as it looks on an object, "
@@ -126,10 +131,13 @@ class Scene:
     theta_max_deg: float = 90.0
     sphere_segments: int = 256
     sphere_rings: int = 128
+    frames: tuple[tuple[float, ...], ...] = ()  # ``views``: per pixel (n, t, b, wo), 12 floats, world
 
     def __post_init__(self):
-        if self.kind not in KINDS:
+        if self.kind not in KINDS + (VIEWS,):
             raise ValueError(f"Scene {self.name!r}: unknown kind {self.kind!r}; expected one of {', '.join(KINDS)}")
+        if (self.kind == VIEWS) != bool(self.frames) or (self.frames and self.resolution != (len(self.frames), 1)):
+            raise ValueError(f"Scene {self.name!r}: frames go with the kind {VIEWS!r}, one per pixel of one row")
         w, h = (int(v) for v in self.resolution)
         if w < 1 or h < 1 or w > 8192 or h > 8192:
             raise ValueError(f"Scene {self.name!r}: resolution {self.resolution!r} out of range")
@@ -197,6 +205,15 @@ def default_scenes(resolution=64) -> list[Scene]:
 ACCURACY_SCENES = ("sphere", "plane", "backlit", "furnace")
 
 
+def view_scenes(frames, key_light) -> list[Scene]:
+    """The ``views`` scenes of the points ``frames`` (N x 12: world n, t, b, wo each) that a camera sees: under one
+    sun from ``key_light`` (a world direction), and in a uniform white environment (their directional albedo)."""
+    frames = tuple(tuple(float(v) for v in f) for f in np.asarray(frames, dtype=np.float64).reshape(-1, 12))
+    size = (len(frames), 1)
+    return [Scene("camera, key light", VIEWS, size, suns=(Sun(tuple(key_light)),), frames=frames),
+            Scene("camera, furnace", VIEWS, size, environment=1.0, frames=frames)]
+
+
 def comparison_scenes(resolution: int, furnace_width: int | None = None) -> list[Scene]:
     """The comparison scenes; the furnace ``furnace_width`` wide (default half the resolution: its reference costs
     an albedo per pixel)."""
@@ -241,6 +258,10 @@ def pixel_geometry(scene: Scene) -> dict:
     panoramas, ``theta_o`` / ``phi_o`` (radians, H x W). Outside the mask the frame is the world frame.
     """
     w, h = scene.resolution
+    if scene.kind == VIEWS:
+        n, t, b, wo = np.asarray(scene.frames, dtype=np.float64).reshape(1, w, 4, 3).transpose(2, 0, 1, 3)
+        every = np.ones((1, w), dtype=bool)
+        return {"mask": every, "hit": every, "n": n, "t": t, "b": b, "wo": wo}
     if scene.kind == "sphere":
         hx, hy = ortho_extent(scene)
         x = (2.0 * _pixel_centres(w) - 1.0) * hx

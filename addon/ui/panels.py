@@ -171,7 +171,11 @@ class LAMINA_PT_budget(LaminaSubpanel, bpy.types.Panel):
         row = layout.row(align=True)
         row.enabled = reason is None
         row.prop(context.window_manager, "lamina_error_budget", text="Budget")
-        row.operator("lamina.fit_to_budget", icon="SORTTIME").budget = context.window_manager.lamina_error_budget
+        op = row.operator("lamina.fit_to_budget", icon="SORTTIME")
+        op.budget, op.view = context.window_manager.lamina_error_budget, context.window_manager.lamina_budget_view
+        measure = layout.row()
+        measure.enabled = reason is None
+        measure.prop(context.window_manager, "lamina_budget_view", expand=True)
         if reason:
             layout.label(text=reason, icon="INFO")
         if not context.scene.cycles.shading_system:

@@ -136,3 +136,53 @@ def test_a_pruned_material_renders_its_prediction_and_renders_without_lamina(for
     here, fresh = renders_with_and_without_lamina(blend, "Lamina pruned", tmp_path)
     assert here.mean() > 1e-3
     np.testing.assert_array_equal(here, fresh)
+
+
+def camera_scene(mat):
+    """A UV sphere with ``mat`` at the origin and the scene's camera 6 units away on -y, looking at it along +y."""
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0)
+    bpy.context.object.data.materials.append(mat)
+    camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
+    bpy.context.scene.collection.objects.link(camera)
+    camera.location, camera.rotation_euler = (0.0, -6.0, 0.0), (np.pi / 2, 0.0, 0.0)
+    bpy.context.scene.camera = camera
+    return camera
+
+
+def test_the_camera_view_is_the_points_of_the_material_it_sees(registered):
+    from addon.operators import budget_ops
+
+    mat = rust_material()
+    camera_scene(mat)
+    scene = bpy.context.scene
+    frames = np.array(budget_ops.camera_view(scene, mat).frames)
+    n, t, b, wo = frames.reshape(-1, 4, 3).transpose(1, 0, 2)
+    assert 20 < len(frames) <= budget_ops.MAX_VIEW_POINTS
+    assert np.all(np.sum(n * wo, axis=1) > 0.0) and np.all(wo[:, 1] < -0.9)  # facing the camera, on -y
+    for u, v in ((n, t), (n, b), (t, b)):
+        np.testing.assert_allclose(np.sum(u * v, axis=1), 0.0, atol=1e-5)
+    assert n[:, 0].min() < -0.8 and n[:, 0].max() > 0.8
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(-0.5, -3.0, 0.0))  # hides the sphere's -x half
+    bpy.context.object.data.materials.append(bpy.data.materials.new("wall"))
+    hidden = np.array(budget_ops.camera_view(scene, mat).frames)
+    assert len(hidden) > 20 and hidden[:, 0].min() > -0.2 and hidden[:, 0].max() > 0.8
+    assert budget_ops.camera_view(scene, bpy.data.materials["wall"]) is not None
+    assert budget_ops.camera_view(scene, bpy.data.materials.new("nowhere")) is None
+    scene.camera = None
+    assert budget_ops.camera_view(scene, mat) is None
+
+
+def test_fit_to_budget_measures_on_the_camera_view_where_asked(registered):
+    mat = rust_material()
+    camera = camera_scene(mat)
+    bpy.context.scene.cycles.shading_system = False
+    with bpy.context.temp_override(material=mat):
+        assert bpy.ops.lamina.fit_to_budget(budget=2.0, view="CAMERA") == {"FINISHED"}
+    record = material.budget_record(mat)
+    assert record["measured_on"].startswith("the camera's view (") and "on the camera's view" in record["summary"]
+    assert " ".join(record["summary"].split()) in " ".join(panel_text(mat).split())
+    bpy.context.scene.camera = None
+    bpy.data.objects.remove(camera)
+    with bpy.context.temp_override(material=mat), pytest.raises(RuntimeError, match="no active camera"):
+        bpy.ops.lamina.fit_to_budget(budget=2.0, view="CAMERA")
+    assert material.budget_record(mat) == record  # left as it was

@@ -4,6 +4,7 @@ again after applying a decision chooses the same configuration."""
 import math
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
 from addon import presets
@@ -104,3 +105,32 @@ def test_the_decision_says_what_it_chose_and_what_it_costs(varnished):
     assert decision.chosen.error <= decision.best_error + 0.02
     with pytest.raises(budget.BudgetError):
         budget.fit_to_budget("thin_coat", p, 0.0, ("nodes",), mappings=("analytic",))
+
+
+def test_the_measurement_reports_its_progress(varnished):
+    p, _ = varnished
+    seen = []
+    budget.fit_to_budget("thin_coat", p, 0.02, ("nodes",), mappings=("analytic",), progress=seen.append)
+    assert len(seen) > 2 and seen == sorted(seen) and seen[-1] == 1.0
+
+
+def test_a_decision_on_a_camera_view_is_measured_there(varnished):
+    """A camera that sees the comparison sphere's points (under its sun) measures the sphere's light: the sphere's
+    own errors for a coat that lets nothing through (its view scenes differ from the sphere only below the
+    surface), and the decision says where it was measured."""
+    from addon.nodes import choice
+    from addon.reference import scenes as S
+
+    p, _ = varnished
+    sphere = S.sphere_scene(resolution=choice.CHOICE_RESOLUTION)
+    g = S.pixel_geometry(sphere)
+    m = g["mask"]
+    frames = np.concatenate([g["n"][m], g["t"][m], g["b"][m], g["wo"][m]], axis=1)
+    view = budget.CameraView(tuple(map(tuple, frames)), sphere.suns[0].direction)
+    decision = budget.fit_to_budget("thin_coat", p, 0.02, ("nodes",), mappings=("analytic",), view=view)
+    assert decision.measured_on == f"the camera's view ({len(frames)} points)" and decision.measured_on in \
+        decision.summary() and decision.to_json()["measured_on"] == decision.measured_on
+    shaders = {"whole": ("nodes", None)}
+    on_view = choice.comparison_errors("thin_coat", p, shaders, scenes=view.scenes())[0]["whole"]
+    on_sphere = choice.comparison_errors("thin_coat", p, shaders, scenes=[sphere])[0]["whole"]
+    assert on_view["camera, key light"] == pytest.approx(on_sphere["sphere"], rel=1e-9)

@@ -168,6 +168,9 @@ REFUSALS = [
     (("optimize", "--blend", "plain.blend", "--all", "--out", "x.blend"), "plain.blend has no Lamina material to fit"),
     (OPTIMIZE + ("--all", "--out", "x.blend"), "argument --all: not allowed with argument --material"),
     (("optimize", "--blend", "corrupt.blend", "--all", "--out", "x.blend"), "Blender cannot read it"),
+    (("optimize", "--blend", "plain.blend", "--all", "--view", "camera", "--out", "x.blend"),
+     "plain.blend has no active camera"),
+    (OPTIMIZE + ("--view", "top", "--out", "x.blend"), "argument --view: invalid choice: 'top'"),
     # bake-medium
     (MEDIUM + ("--preset", "fluff", "--out", "x.blend"), "unknown neural_medium preset 'fluff'; available:"),
     (MEDIUM + ("--json", "zero_medium.json", "--out", "x.blend"), "zero density"),

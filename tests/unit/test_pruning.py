@@ -1,7 +1,7 @@
 """Lobe pruning (``addon.nodes.pruning``): a pruned material renders its closures but the listed ones (what Cycles
 renders is linear in its closures), the sets offered leave out the weakest closures first and never more than
-``MAX_SHARE`` of the material's albedo, the cost counts only what feeds a closure, and Fit to budget keeps a pruned
-configuration only within the budget of the same configuration with every closure."""
+``MAX_SHARE`` of the material's albedo, the cost counts only what feeds a closure of the form's own shader, and Fit
+to budget keeps a pruned configuration only within the budget of the same configuration with every closure."""
 import numpy as np
 import pytest
 
@@ -65,6 +65,20 @@ def test_the_cost_counts_only_what_feeds_a_closure():
     (whole_ops, whole_closures), (ops, closures) = (budget.shader_size("thin_coat", p, "osl", fit)
                                                     for fit in (None, third))
     assert closures == whole_closures - 1 and ops < whole_ops
+
+
+def test_each_form_is_counted_in_its_own_closure_calls():
+    """An anisotropic stack's node group adds a lobe where the Metallic BSDF is not anisotropic enough (the top's
+    mean Fresnel), so its calls are metal, glossy, glossy where OSL's are metal, glossy: leaving out the node group's
+    bottom lobe (its third call) takes the stack's arithmetic with it, leaving out the top's second lobe does not."""
+    p = preset("aniso_stack", "carbon_fibre")
+    assert pruning.call_kinds("aniso_stack", p, "nodes") == ["metal", "glossy", "glossy"]
+    assert pruning.call_kinds("aniso_stack", p, "osl") == ["metal", "glossy"]
+    whole, top, bottom = (budget.shader_size("aniso_stack", p, "nodes", fit) for fit in (
+        None, pruning.Pruned((1,), ("glossy",)), pruning.Pruned((2,), ("glossy",))))
+    osl_whole = budget.shader_size("aniso_stack", p, "osl")
+    assert whole[0] > osl_whole[0] and whole[1] == 3
+    assert bottom[0] < 0.5 * whole[0] < top[0] < whole[0]
 
 
 def test_a_pruned_configuration_is_chosen_only_within_the_budget_of_its_whole():

@@ -320,3 +320,42 @@ def test_atomic_write_leaves_no_temp_file(tmp_path):
             f.write(b"new")
     assert target.read_bytes() == b"new"
     assert sorted(os.listdir(tmp_path)) == ["x.bin"]
+
+
+def _frames_of(scene):
+    """A ``views`` scene's frames from another scene's pixel geometry (its masked pixels, row by row)."""
+    g = S.pixel_geometry(scene)
+    m = g["mask"]
+    return np.concatenate([g["n"][m], g["t"][m], g["b"][m], g["wo"][m]], axis=1), m
+
+
+@pytest.mark.parametrize("bsdf", [lambert, translucent, ggx_iso(0.3)])
+def test_a_camera_view_renders_the_points_it_is_given_as_the_panoramas_do(bsdf):
+    """The points of the plane and furnace panoramas, given as the frames of a camera's view, render as there: under
+    the key light (the plane's sun) and in the white environment (the furnace)."""
+    plane = S.plane_scene(resolution=(16, 8))
+    frames, mask = _frames_of(plane)
+    key, furnace = S.view_scenes(frames, plane.suns[0].direction)
+    assert (key.kind, furnace.kind) == (S.VIEWS, S.VIEWS) and key.resolution == (len(frames), 1)
+    assert np.allclose(S.reference_image(key, bsdf)[0], S.reference_image(plane, bsdf)[mask], atol=1e-12)
+    albedo = S.reference_image(furnace, bsdf)[0]
+    assert np.allclose(albedo, S.reference_image(S.furnace_scene(resolution=(16, 8)), bsdf)[mask], atol=1e-12)
+    assert S.scene_mask(key).all()
+
+
+def test_a_camera_view_in_another_frame_gives_the_same_light():
+    """The sphere's points (a frame turned with every pixel) lit from its sun: a rotation-invariant BSDF gives the
+    same values, whatever the world frame (the key light turned with them)."""
+    frames, _ = _frames_of(S.sphere_scene(resolution=12))
+    rot = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]])
+    sun = S.sphere_scene().suns[0].direction
+    turned = (frames.reshape(-1, 4, 3) @ rot.T).reshape(-1, 12)
+    a, b = (S.reference_image(S.view_scenes(f, s)[0], lambert) for f, s in ((frames, sun), (turned, rot @ sun)))
+    assert np.allclose(a, b, atol=1e-12) and a.max() > 0.1
+
+
+def test_frames_go_with_the_views_kind_only():
+    with pytest.raises(ValueError, match="frames"):
+        S.Scene("x", S.VIEWS, (1, 1))
+    with pytest.raises(ValueError, match="frames"):
+        S.Scene("x", "plane", (1, 1), frames=((0.0,) * 12,))
