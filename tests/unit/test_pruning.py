@@ -91,3 +91,42 @@ def test_a_pruned_configuration_is_chosen_only_within_the_budget_of_its_whole():
     for value in (1e-6, 0.01, 0.05, 0.2):
         chosen = budget.pick(cands, value)
         assert chosen.change <= value and chosen.error <= min(c.error for c in cands) + value
+
+
+def jittered(model_id: str, name: str, seed: int):
+    """The preset ``name`` with every number scaled by a random factor in [0.5, 1.5] (colours and directions per
+    channel), then clamped into the model's ranges by its own validation: a random material of the same structure."""
+    rng = np.random.default_rng(seed)
+
+    def jitter(value):
+        if isinstance(value, dict):
+            return {k: v if k in ("name", "description", "demo") else jitter(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [jitter(v) for v in value]
+        if isinstance(value, float):
+            return value * rng.uniform(0.5, 1.5)
+        return value
+
+    return MODELS[model_id].params_from_dict(jitter(presets.load(model_id, name)))
+
+
+MATERIALS = [(m, presets.names(m)[0], None) for m in MODELS] + [
+    ("spongecake", "leaf", 1), ("thin_coat", "varnished_metal", 2), ("micrograin", "rust_on_metal", 3)]
+
+
+@pytest.mark.parametrize("model_id, name, seed", MATERIALS)
+def test_pruning_stays_within_the_budget_across_presets_and_random_materials(model_id, name, seed):
+    """What Fit to budget chooses is never further than the budget from the most accurate configuration, nor a
+    pruned one more than the budget from its whole, and the closures it leaves out carry what ``lobe_energies``
+    measured: at most ``MAX_SHARE`` of the material's albedo."""
+    p = preset(model_id, name) if seed is None else jittered(model_id, name, seed)
+    cands = budget.candidates(model_id, p, ("osl",), mappings=("analytic",))
+    best = min(c.error for c in cands)
+    albedo = float(np.max(predicted_furnace(model_id, p, "osl")(pruning.views())))
+    energy = pruning.lobe_energies(model_id, p, "osl")
+    for c in cands:
+        if c.pruned and c.variant == budget.AS_SET:
+            assert energy[list(c.pruned.calls)].sum() <= pruning.MAX_SHARE * albedo + 1e-12
+    for value in (0.01, 0.02, 0.05, 0.1):
+        chosen = budget.pick(cands, value)
+        assert chosen.error <= best + value and chosen.change <= value
