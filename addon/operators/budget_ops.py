@@ -98,7 +98,7 @@ def camera_view(scene, mat, rays: int = VIEW_RAYS) -> budget.CameraView | None:
     if not frames:
         return None
     step = max(1, -(-len(frames) // MAX_VIEW_POINTS))
-    key = to_world.to_3x3() @ Vector(ref_scenes.sun_direction(45.0, 30.0))
+    key = to_world.to_3x3() @ Vector(ref_scenes.sphere_scene().suns[0].direction)  # as the sphere's camera sees it
     return budget.CameraView(tuple(frames[::step]), tuple(key.normalized()))
 
 
