@@ -4,11 +4,13 @@ to the reference BSDF (issue 14; bpy-free).
 What a mapping's ``shade`` renders is a sum of closures whose weights depend on the view only. The fitted mapping
 keeps those closures (their shapes: narrow peaks, tilted normals, anisotropy) and multiplies each closure's colour
 by an RGB table over the view cosine; it may add up to ``MAX_EXTRAS`` closures from a small dictionary (Lambert,
-translucency, GGX around the normal, Beckmann refraction around the view), each with an RGB weight
-table. Per tabulated view cosine the weights minimise the cosine-weighted error against the reference over (ωi, ωo)
-(non-negative least squares), with the reference's own directional albedo matched (a heavily weighted row). The
-forward model is ``closures_np``: the fit optimises what Cycles renders. Tables are piecewise linear in √cos θo on
-``KNOTS`` uniform knots (``view_cosines``; a Color Ramp in node groups, a constant array in OSL: both exact).
+translucency, GGX around the normal, Beckmann refraction around the view), each with an RGB weight table, beside
+the material's closures or in place of one of them: the fitted mapping renders at most as many closures as the
+analytic one (its render cost). Per tabulated view cosine the weights minimise the cosine-weighted error against
+the reference over (ωi, ωo) (non-negative least squares), with the reference's own directional albedo matched (a
+heavily weighted row). The forward model is ``closures_np``: the fit optimises what Cycles renders. Tables are
+piecewise linear in √cos θo on ``KNOTS`` uniform knots (``view_cosines``; a Color Ramp in node groups, a constant
+array in OSL: both exact).
 
 A driven input (``Driven``: fed by a texture or keyframes) adds an axis: the material is fitted at ``Driven.values``
 (a few values across its range) with one set of closures, and the shader interpolates the tables linearly between
@@ -67,7 +69,7 @@ def extra_dictionary() -> list[tuple[str, dict]]:
     a one-off render, α = 1, IOR 1.5; not yet a test), so its prediction would be off there."""
     up = (0.0, 0.0, 1.0)
     out = [("diffuse", {}), ("translucent", {})]
-    out += [("ggx", {"alpha": a, "normal": up}) for a in (0.15, 0.3, 0.6, 1.0)]
+    out += [("ggx", {"alpha": a, "normal": up}) for a in (0.1, 0.15, 0.2, 0.3, 0.45, 0.6, 0.8, 1.0)]
     out += [("beckmann_refraction", {"alpha": a, "ior": 10.0, "normal": "view"})
             for a in (0.1, 0.2, 0.3, 0.5, 0.7, 1.0)]
     return out
@@ -419,14 +421,17 @@ def _grey(kind: str, kw: dict, form: str) -> bool:
     return form == "nodes" and (kind == "conductor" or (kind == "beckmann" and kw.get("eta") is not None))
 
 
-def fit(backend_of, ref_eval, ref_albedo, form: str, damping: float = 1.0, groups=None, extras=None) -> Fit:
+def fit(backend_of, ref_eval, ref_albedo, form: str, damping: float = 1.0, groups=None, extras=None,
+        atoms=None) -> Fit:
     """Fit the mapping whose view-only closures ``backend_of(wo)`` records (a ``NumpyBackend`` after ``shade``)
     against the reference ``ref_eval(wi, wo)`` (N, 3) and directional albedo ``ref_albedo(wo)`` (N, 3): up to
-    ``MAX_EXTRAS`` extra closures chosen greedily, each kept only if it lowers the error by ``EXTRA_GAIN``. The
-    residual at each direction is divided by (the reference's mean level + its value)^``damping``: 1 weighs
-    relative errors (a peak counts no more than the dim rest), 0 absolute ones. Given ``groups`` (the atoms) and
-    ``extras`` (the extra closures, all used), the fit keeps that structure (``fit_driven``)."""
-    closures = _fitted_closures(backend_of(np.array([[0.0, 0.0, 1.0]])).closures)
+    ``MAX_EXTRAS`` extra closures chosen greedily (``_chosen``), each kept only if it lowers the error by
+    ``EXTRA_GAIN``, within the analytic mapping's closure count. The residual at each direction is divided by (the
+    reference's mean level + its value)^``damping``: 1 weighs relative errors (a peak counts no more than the dim
+    rest), 0 absolute ones. Given ``groups`` (the atoms), ``extras`` (the extra closures, all used) and ``atoms``
+    (which atoms render; all by default), the fit keeps that structure (``fit_driven``)."""
+    analytic = backend_of(np.array([[0.0, 0.0, 1.0]]))
+    closures = _fitted_closures(analytic.closures)
     groups = atom_groups(backend_of) if groups is None else tuple(groups)
     present = {kind for kind, _, _ in closures}
     fixed = extras is not None
@@ -437,26 +442,54 @@ def fit(backend_of, ref_eval, ref_albedo, form: str, damping: float = 1.0, group
     for g, (kind, _, kw) in zip(groups, closures):
         grey[g] = _grey(kind, kw, form)
     systems = [_knot_systems(backend_of, ref_eval, ref_albedo, mu, groups, extras, damping) for mu in view_cosines()]
-    use = np.arange(n_analytic + len(extras)) < (n_analytic + len(extras) if fixed else n_analytic)
-    error_analytic = _error(systems, [np.tile((np.arange(len(use)) < n_analytic).astype(float), (3, 1))]
-                            * len(systems))
-    best = _solve_all(systems, use, grey, n_analytic)
-    error = _error(systems, best)
-    for _ in range(0 if fixed else MAX_EXTRAS):
-        trials = []
-        for e in np.flatnonzero(~use):
-            trial = use.copy()
-            trial[e] = True
-            weights = _solve_all(systems, trial, grey, n_analytic)
-            trials.append((_error(systems, weights), e, weights))
-        new_error, e, weights = min(trials, key=lambda t: t[0])
-        if new_error > (1.0 - EXTRA_GAIN) * error or error - new_error < MIN_GAIN:
-            break
-        use[e], error, best = True, new_error, weights
+    analytic_use = np.arange(n_analytic + len(extras)) < n_analytic
+    error_analytic = _error(systems, [np.tile(analytic_use.astype(float), (3, 1))] * len(systems))
+    if fixed:
+        use = np.concatenate([np.ones(n_analytic, dtype=bool) if atoms is None else np.asarray(atoms, dtype=bool),
+                              np.ones(len(extras), dtype=bool)])
+        best = _solve_all(systems, use, grey, n_analytic)
+        error = _error(systems, best)
+    else:
+        budget = analytic.closure_count() - len({kind for kind, _, _ in analytic.closures if kind in FIXED})
+        use, best, error = _chosen(systems, analytic_use, grey, n_analytic, budget)
     x = np.transpose(np.stack(best), (2, 0, 1))  # (A + E, K, 3)
     chosen = np.flatnonzero(use[n_analytic:])
     return Fit(x[:n_analytic], tuple(extras[e] for e in chosen), x[n_analytic + chosen], error_analytic, error,
                groups)
+
+
+def _rendered(use: np.ndarray, weights) -> np.ndarray:
+    """The atoms of ``use`` that the solved ``weights`` keep somewhere (one the fit zeroes at every knot is not
+    rendered: ``ScaledBackend.flush``, ``shade``)."""
+    return use & (np.max([x.max(axis=0) for x in weights], axis=0) > 0.0)
+
+
+def _chosen(systems, use, grey, n_analytic: int, budget: int):
+    """(use, weights, error): greedy moves from the analytic atoms, each the best of adding one extra closure
+    (while the rendered closures stay within ``budget``) or putting one in place of a rendered atom; a move is
+    kept only if it lowers the error by ``EXTRA_GAIN`` and ``MIN_GAIN``, at most ``MAX_EXTRAS`` of them."""
+    best = _solve_all(systems, use, grey, n_analytic)
+    use = _rendered(use, best)
+    error = _error(systems, best)
+    for _ in range(MAX_EXTRAS):
+        trials = []
+        for e in np.flatnonzero(~use[n_analytic:]) + n_analytic:
+            added = use.copy()
+            added[e] = True
+            dropped = [None] if added.sum() <= budget else np.flatnonzero(use)
+            for d in dropped:
+                trial = added.copy()
+                if d is not None:
+                    trial[d] = False
+                weights = _solve_all(systems, trial, grey, n_analytic)
+                trials.append((_error(systems, weights), _rendered(trial, weights), weights))
+        if not trials:
+            break
+        new_error, trial, weights = min(trials, key=lambda t: t[0])
+        if new_error > (1.0 - EXTRA_GAIN) * error or error - new_error < MIN_GAIN:
+            break
+        use, error, best = trial, new_error, weights
+    return use, best, error
 
 
 def common_groups(backends_of) -> tuple[int, ...]:
@@ -471,14 +504,16 @@ def common_groups(backends_of) -> tuple[int, ...]:
 
 def fit_driven(problems, driven: Driven, form: str, damping: float = 1.0, progress=None) -> Fit:
     """The fit of a texture-driven material: ``problems[j]`` = (backend_of, ref_eval, ref_albedo) with the input at
-    ``driven.values[j]``. The middle value chooses the extra closures; every value is fitted with them and the
-    ``common_groups``. ``progress(fraction)`` after each value."""
+    ``driven.values[j]``. The middle value chooses the extra closures and the atoms that render; every value is
+    fitted with them and the ``common_groups``. ``progress(fraction)`` after each value."""
     groups = common_groups([backend_of for backend_of, _, _ in problems])
     middle = len(problems) // 2
     order = [middle] + [j for j in range(len(problems)) if j != middle]
     fits = {}
     for done, j in enumerate(order):
-        fits[j] = fit(*problems[j], form, damping, groups, None if j == middle else list(fits[middle].extras))
+        structure = {} if j == middle else {"extras": list(fits[middle].extras),
+                                            "atoms": fits[middle].scales.max(axis=(1, 2)) > 0.0}
+        fits[j] = fit(*problems[j], form, damping, groups, **structure)
         if progress is not None:
             progress((done + 1) / len(order))
     ordered = [fits[j] for j in range(len(problems))]
