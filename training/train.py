@@ -19,6 +19,7 @@ import argparse
 import datetime
 import json
 import math
+import os
 import subprocess
 import sys
 import time
@@ -38,6 +39,7 @@ WEIGHT_DECAY = 1e-4  # AdamW; a few thousand configurations per network: keep th
 ENERGY_WEIGHT = 2.0  # energy matters most in renders (and the furnace); see lobe_loss
 ENERGY_FLOOR = 1e-3  # about the median configuration's mean f |cos wo| of multiple scattering in the dataset
 VALIDATION_SET = Path(__file__).resolve().parents[1] / "tests" / "data" / "spongecake_ms_validation"
+DEVICE = torch.device("cpu")  # where training runs (``--device``); the exported weights are numpy either way
 
 
 class TorchOps:
@@ -77,20 +79,20 @@ def make_network(n_layers: int) -> torch.nn.Sequential:
         last.weight.mul_(0.1)
         last.bias.zero_()
         last.bias[-ms.WEIGHT_OUTPUTS:] = -5.0  # start with small lobes
-    return torch.nn.Sequential(*modules).double()
+    return torch.nn.Sequential(*modules).double().to(DEVICE)
 
 
 def to_mlp(net: torch.nn.Sequential, manifest: dict) -> mlp.MLP:
     linears = [m for m in net if isinstance(m, torch.nn.Linear)]
-    return mlp.MLP(tuple(m.weight.detach().numpy().T.copy() for m in linears),
-                   tuple(m.bias.detach().numpy().copy() for m in linears), manifest)
+    return mlp.MLP(tuple(m.weight.detach().cpu().numpy().T.copy() for m in linears),
+                   tuple(m.bias.detach().cpu().numpy().copy() for m in linears), manifest)
 
 
 # ------------------------------------------------------------------------------------------------ loss
 
 def predicted_lobe(net, rows: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
     """W1 f_ss(params') + W2 / pi for B configurations at their (n_wi x n_wo) pairs, times |cos wo|: (B, n_wi, n_wo, 3)."""
-    x = torch.as_tensor(ms.features(rows.numpy()))
+    x = torch.as_tensor(ms.features(rows.cpu().numpy()), device=rows.device)
     lobe, weights = ms.decode(net(x), rows, TorchOps)
     layers = [LayerBatch(kind=lobe[:, k, layer_rows.TYPE].round().long(), roughness=lobe[:, k, layer_rows.ROUGHNESS],
                          albedo=lobe[:, k, layer_rows.ALBEDO], thickness=lobe[:, k, layer_rows.THICKNESS],
@@ -120,7 +122,7 @@ def lobe_loss(net, data: dict, index, rng=None) -> torch.Tensor:
     truth = target(batch)
     predicted = predicted_lobe(net, *tensors(batch))
     lobe = (predicted - truth).abs().mean(dim=(1, 2, 3))
-    down = torch.as_tensor(batch["wo"][:, None, :, 2:] < 0)
+    down = torch.as_tensor(batch["wo"][:, None, :, 2:] < 0, device=DEVICE)
     energy = sum(((predicted - truth) * side).mean(dim=2).abs().mean(dim=(1, 2)) for side in (down, ~down))
     return ((lobe + ENERGY_WEIGHT * energy) / (truth.mean(dim=(1, 2, 3)) + ENERGY_FLOOR)).mean()
 
@@ -149,12 +151,11 @@ def augment(batch: dict, rng: np.random.Generator) -> dict:
 
 
 def target(batch: dict) -> torch.Tensor:
-    return torch.as_tensor(batch["ms"] * np.abs(batch["wo"][:, None, :, 2:]), dtype=torch.float64)
+    return torch.as_tensor(batch["ms"] * np.abs(batch["wo"][:, None, :, 2:]), dtype=torch.float64, device=DEVICE)
 
 
 def tensors(batch: dict):
-    return (torch.as_tensor(batch["rows"], dtype=torch.float64), torch.as_tensor(batch["wi"], dtype=torch.float64),
-            torch.as_tensor(batch["wo"], dtype=torch.float64))
+    return tuple(torch.as_tensor(batch[k], dtype=torch.float64, device=DEVICE) for k in ("rows", "wi", "wo"))
 
 
 # ------------------------------------------------------------------------------------------ evaluation
@@ -162,7 +163,7 @@ def tensors(batch: dict):
 def lobe_errors(net, data: dict) -> dict:
     """``addon.bake.validation.lobe_errors`` for the network being trained (torch forward pass)."""
     with torch.no_grad():
-        predicted = predicted_lobe(net, *tensors(data)).numpy()
+        predicted = predicted_lobe(net, *tensors(data)).cpu().numpy()
     return validation.lobe_errors(data, predicted)
 
 
@@ -233,8 +234,8 @@ def code_version() -> str:
                                 ":(exclude)addon/bake/weights"], cwd=root,
                                capture_output=True, text=True, check=True).stdout.strip()
         return rev + ("+local changes" if dirty else "")
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
+    except (OSError, subprocess.CalledProcessError):  # a copy without git (a lent GPU machine): as its caller says
+        return os.environ.get("LAMINA_CODE_VERSION", "unknown")
 
 
 def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path | None, log=print) -> dict:
@@ -272,11 +273,14 @@ def main(argv=None) -> int:
     ap.add_argument("--validation", type=Path, default=VALIDATION_SET)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--device", default="cpu", help="torch device to train on (cuda where a GPU is lent)")
     ap.add_argument("--quick", action="store_true", help="a few seconds of training (tests)")
     ap.add_argument("--rescore", action="store_true",
                     help="only re-score the weights in --out on --validation and record it in their manifests")
     a = ap.parse_args(argv)
     torch.set_num_threads(a.threads)
+    global DEVICE
+    DEVICE = torch.device(a.device)
     if a.rescore:
         for n_layers in a.layers:
             if n_layers > ms.NETWORK_LAYERS:  # no network of its own: score the grouped prediction, record nothing

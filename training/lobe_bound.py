@@ -1,0 +1,68 @@
+"""How close the paper's lobe form can come to the Monte Carlo data at all: W1 f_ss(params') + W2 / pi with every
+output optimised for each held-out configuration on its own (no network), starting from the shipped network's
+prediction. The gap between this bound and the network is what more data and training can win; what is left at the
+bound is the lobe form's own (issue 15's goal of 25% mean lobe error is measured against it in docs/training.md).
+
+    python -m training.lobe_bound            # both layer counts of the shipped held-out set, about a minute
+
+The loss is the score itself: the relative L1 error of f |cos wo| over each configuration's stored pairs
+(``validation.lobe_errors``), optionally plus ``--energy`` times the relative error of its energy (the training
+loss's balance), minimised by Adam with a cosine learning-rate decay.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+import numpy as np
+import torch
+
+from addon.bake import spongecake as ms
+from addon.bake import validation
+from training import train
+
+
+def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0) -> np.ndarray:
+    """f |cos wo| (C, n_wi, n_wo, 3) of the lobe form with its outputs optimised per configuration."""
+    rows, wi, wo = train.tensors(data)
+    truth = train.target(data)
+    total = truth.sum(dim=(1, 2, 3)).clamp_min(1e-12)
+    start = ms.network(rows.shape[1])(ms.features(data["rows"].astype(np.float64)))
+    raw = torch.tensor(start, dtype=torch.float64, requires_grad=True)
+    opt = torch.optim.Adam([raw], lr=rate)
+    for step in range(steps):
+        for group in opt.param_groups:
+            group["lr"] = rate * 0.5 * (1.0 + math.cos(math.pi * step / steps)) + 1e-5
+        predicted = train.predicted_lobe(lambda x: raw, rows, wi, wo)
+        lobe = (predicted - truth).abs().sum(dim=(1, 2, 3)) / total
+        gained = (predicted.sum(dim=(1, 2, 3)) - truth.sum(dim=(1, 2, 3))).abs() / total
+        loss = (lobe + energy * gained).sum()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    with torch.no_grad():
+        return train.predicted_lobe(lambda x: raw, rows, wi, wo).cpu().numpy()
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m training.lobe_bound", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--validation", default=str(train.VALIDATION_SET))
+    ap.add_argument("--steps", type=int, default=2000)
+    ap.add_argument("--rate", type=float, default=0.02)
+    ap.add_argument("--energy", type=float, default=0.0, help="weight of the energy error in the loss")
+    a = ap.parse_args(argv)
+    torch.set_num_threads(1)
+    for n_layers in range(1, ms.NETWORK_LAYERS + 1):
+        data = validation.load_shards(a.validation, n_layers)
+        for label, predicted in (("network", validation.predicted_lobes(data, energy=False)),
+                                 ("bound", best_lobes(data, a.steps, a.rate, a.energy))):
+            scores = validation.lobe_errors(data, predicted)
+            print(json.dumps({"layers": n_layers, "lobes": label, "steps": a.steps, "energy_weight": a.energy,
+                              **{k: v for k, v in scores.items() if k != "per_config"}}), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
