@@ -206,7 +206,8 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
                     f"validation loss {val_loss:.3e} (best {best[0]:.3e})  ({time.time() - start:.0f} s)", flush=True)
     if best[1] is not None:
         net.load_state_dict(best[1])
-    return net, {"epochs": epoch, "steps": step, "best_step": best[2], "seconds": round(time.time() - start, 1),
+    return net, {"epochs": epoch, "steps": step, "best_step": best[2], "batch": batch, "device": str(DEVICE),
+                 "seconds": round(time.time() - start, 1),
                  "train_configs": int(len(train_idx)), "split_validation_configs": int(n_val), "val_index": val}
 
 
@@ -249,6 +250,7 @@ def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path
         "training_configs": info["train_configs"], "pairs_per_config": int(data["ms"].shape[1] * data["ms"].shape[2]),
         "paths_per_wi": metas[0]["paths"], "max_depth": metas[0]["max_depth"], "dataset_seed": metas[0]["seed"],
         "dataset_version": metas[0]["version"], "epochs": info["epochs"], "steps": info["steps"], "best_step": info["best_step"],
+        "batch": info["batch"], "device": info["device"],
         "dataset_worker_seconds": round(sum(m.get("seconds", 0.0) for m in metas)),
         "training_seconds": info["seconds"], "split_validation": split, "dataset_noise": dataset.noise(data),
         "date": datetime.date.today().isoformat(), "code_version": code_version(),
@@ -274,6 +276,7 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--device", default="cpu", help="torch device to train on (cuda where a GPU is lent)")
+    ap.add_argument("--batch", type=int, default=32, help="configurations per mini-batch")
     ap.add_argument("--quick", action="store_true", help="a few seconds of training (tests)")
     ap.add_argument("--rescore", action="store_true",
                     help="only re-score the weights in --out on --validation and record it in their manifests")
@@ -300,7 +303,7 @@ def main(argv=None) -> int:
         minutes = 0.05 if a.quick else a.minutes
         print(f"training the {n_layers}-layer network on {len(data['rows'])} configurations for {minutes} min",
               flush=True)
-        net, info = train(data, n_layers, minutes, seed=a.seed, batch=4 if a.quick else 32)
+        net, info = train(data, n_layers, minutes, seed=a.seed, batch=4 if a.quick else a.batch)
         export(net, info, data, n_layers, a.out, a.validation)
     return 0
 
