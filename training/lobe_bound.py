@@ -3,7 +3,8 @@ output optimised for each held-out configuration on its own (no network), starti
 prediction. The gap between this bound and the network is what more data and training can win; what is left at the
 bound is the lobe form's own (issue 15's goal of 25% mean lobe error is measured against it in docs/training.md).
 
-    python -m training.lobe_bound            # both layer counts of the shipped held-out set, about a minute
+    python -m training.lobe_bound            # both layer counts of the shipped held-out set, a few minutes
+    python -m training.lobe_bound --halves   # one layer, as two identical halves through the two-layer form
 
 The loss is the score itself: the relative L1 error of f |cos wo| over each configuration's stored pairs
 (``validation.lobe_errors``), optionally plus ``--energy`` times the relative error of its energy (the training
@@ -19,8 +20,8 @@ import sys
 import numpy as np
 import torch
 
+from addon.bake import layer_rows, validation
 from addon.bake import spongecake as ms
-from addon.bake import validation
 from training import train
 
 
@@ -46,20 +47,32 @@ def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0) -> np.n
         return train.predicted_lobe(lambda x: raw, rows, wi, wo).cpu().numpy()
 
 
+def halved(data: dict) -> dict:
+    """One-layer configurations as the same layer cut in two identical halves (the same material): the two-layer
+    lobe form, with an extra lobe per half, applies to them."""
+    rows = np.repeat(data["rows"], 2, axis=1)
+    rows[:, :, layer_rows.THICKNESS] *= 0.5
+    return {**data, "rows": rows}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.lobe_bound", description=__doc__.split("\n\n")[0])
     ap.add_argument("--validation", default=str(train.VALIDATION_SET))
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--rate", type=float, default=0.02)
     ap.add_argument("--energy", type=float, default=0.0, help="weight of the energy error in the loss")
+    ap.add_argument("--halves", action="store_true",
+                    help="one layer only: the two-layer form on the layer cut in two halves (--validation's 1 layer)")
     a = ap.parse_args(argv)
     torch.set_num_threads(1)
-    for n_layers in range(1, ms.NETWORK_LAYERS + 1):
+    for n_layers in (1,) if a.halves else range(1, ms.NETWORK_LAYERS + 1):
         data = validation.load_shards(a.validation, n_layers)
-        for label, predicted in (("network", validation.predicted_lobes(data, energy=False)),
-                                 ("bound", best_lobes(data, a.steps, a.rate, a.energy))):
+        form = halved(data) if a.halves else data
+        for label, predicted in (("network", validation.predicted_lobes(form, energy=False)),
+                                 ("bound", best_lobes(form, a.steps, a.rate, a.energy))):
             scores = validation.lobe_errors(data, predicted)
-            print(json.dumps({"layers": n_layers, "lobes": label, "steps": a.steps, "energy_weight": a.energy,
+            print(json.dumps({"layers": n_layers, "halves": a.halves, "lobes": label, "steps": a.steps,
+                              "energy_weight": a.energy,
                               **{k: v for k, v in scores.items() if k != "per_config"}}), flush=True)
     return 0
 
