@@ -62,6 +62,7 @@ def test_the_compare_operator_runs_on_a_porous_layer_and_refuses_a_wrapped_shade
         addon.unregister()
 
 
+@pytest.mark.version_independent("a CLI pipeline in a subprocess; the compare operator runs under 4.2 too")
 def test_cli_compare_micrograin_and_its_refusals(tmp_path):
     def cli(*args):
         return subprocess.run([sys.executable, "-m", "addon.cli", *args], cwd=ROOT, capture_output=True, text=True)

@@ -176,6 +176,8 @@ def test_the_compare_operator_shows_the_principled_panel():
         addon.unregister()
 
 
+@pytest.mark.version_independent("a CLI pipeline in a subprocess; the compare operator with the Principled "
+                                  "coat runs under 4.2 too")
 def test_cli_compare_thin_coat_with_principled_and_truth(tmp_path):
     args = [sys.executable, "-m", "addon.cli", "compare", "--model", "thin_coat", "--preset", "glazed_ceramic",
             "--principled", "--forms", "osl", "--scenes", "sphere,furnace", "--samples", "4", "--resolution", "16",
