@@ -11,7 +11,7 @@ DATA ?= $(HOME)/.cache/lamina/spongecake-ms
 # Neural participating media: tables of double and multiple scattering per material (resumable; docs/training.md).
 MEDIUM_DATA ?= $(HOME)/.cache/lamina/neural-medium
 
-.PHONY: venv test test-5.0 test-unit test-blender-5.0 test-4.2 test-all demo bench assets extension dataset train train-1 train-2 validation-set medium-dataset medium-networks clean
+.PHONY: venv test test-5.0 test-unit test-unit-1 test-unit-2 test-blender-5.0 test-4.2 test-all demo bench assets extension dataset train train-1 train-2 validation-set medium-dataset medium-networks clean
 
 venv: $(VENV)/.stamp
 
@@ -28,16 +28,28 @@ $(VENV42)/.stamp: requirements-blender-4.2.txt
 	$(PY42) -m pip install --quiet -r requirements-blender-4.2.txt
 	touch $@
 
-# Three suites on the two cores, the longest first: the Blender tests on bpy 5.0 and on Blender 4.2 LTS (the oldest
-# supported), then the unit tests on the core that frees first; each suite's output is printed whole when it ends
-# (-O), and make fails if any does. test-5.0 is both suites on bpy 5.0.
+# The unit tests in two halves by file name (test_a* to test_m*, then the rest), so that each core takes one after
+# its Blender suite.
+UNIT_1 := $(wildcard tests/unit/test_[a-m]*.py)
+UNIT_2 := $(filter-out $(UNIT_1),$(wildcard tests/unit/test_*.py))
+
+# Four runs on the two cores, the longest first: the Blender tests on bpy 5.0 and on Blender 4.2 LTS (the oldest
+# supported; tests marked version_independent run on 5.0 only, tests/blender/conftest.py), then each half of the unit
+# tests on the core that frees first; each run's output is printed whole when it ends (-O), and make fails if any
+# does. test-5.0 is both suites on bpy 5.0.
 test: venv $(VENV42)/.stamp
-	$(MAKE) --no-print-directory -j2 -O test-blender-5.0 test-4.2 test-unit
+	$(MAKE) --no-print-directory -j2 -O test-blender-5.0 test-4.2 test-unit-1 test-unit-2
 
 test-5.0: test-unit test-blender-5.0
 
 test-unit: venv
 	$(PY) -m pytest -m "not slow" -q -p no:cacheprovider tests/unit
+
+test-unit-1: venv
+	$(PY) -m pytest -m "not slow" -q -p no:cacheprovider $(UNIT_1)
+
+test-unit-2: venv
+	$(PY) -m pytest -m "not slow" -q -p no:cacheprovider $(UNIT_2)
 
 test-blender-5.0: venv
 	$(PY) -m pytest -m "not slow" -q -p no:cacheprovider tests/blender
