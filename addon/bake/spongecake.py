@@ -55,7 +55,7 @@ ALPHA_RANGE = (0.01, 1.0)
 G_MAX = 0.95
 THICKNESS_IN = (0.01, 10.0)
 THICKNESS_OUT = (0.01, 20.0)
-MS_VERSION = 2  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs)
+MS_VERSION = 3  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin
 NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 
@@ -247,10 +247,11 @@ def _prediction(lobes, weights) -> Prediction:
 
 def energy_scale(left, lobes, limit=1.0):
     """Multiple scattering's energy scale (..., 3) from what single scattering and the Dirac leave of the stack
-    (``left``) and the albedo of the network's lobes (``lobes``): left / lobes, so that single plus multiple
-    scattering never return more than they receive, at most ``limit`` (1: the network's lobes as predicted wherever
-    they fit in; ``white_limit`` for stacks that conserve energy once white)."""
-    share = np.where(lobes > 1e-9, np.maximum(left, 0.0) / np.maximum(lobes, 1e-9), np.inf)
+    (``left``) and the albedo of the network's lobes (``lobes``): (left − ``ENERGY_MARGIN``) / lobes, so that single
+    plus multiple scattering never return more than they receive, even where the estimates of ``left`` and
+    ``lobes`` err by their noise; at most ``limit`` (1: the network's lobes as predicted wherever they fit in;
+    ``white_limit`` for stacks that conserve energy once white)."""
+    share = np.where(lobes > 1e-9, np.maximum(left - model.ENERGY_MARGIN, 0.0) / np.maximum(lobes, 1e-9), np.inf)
     return np.minimum(share, limit)
 
 
@@ -273,20 +274,33 @@ def energy_table(params: model.Params, left_of, lobes_of, side: float = 1.0, per
     (N, 3) each), limited by ``white_limit`` where the stack conserves energy once white. Where a layer is oriented
     off the normal the scale depends on the view's azimuth: at ``ENERGY_AZIMUTHS`` azimuths (``energy_azimuths``),
     (``ENERGY_KNOTS``, P, 3) with ``per_azimuth`` (P = 1 for isotropic stacks), else the least over them,
-    (``ENERGY_KNOTS``, 3), so that no azimuth gains energy (a closure weight that follows the view's angle only)."""
+    (``ENERGY_KNOTS``, 3), so that no azimuth gains energy (a closure weight that follows the view's angle only).
+    The P estimates at the normal view, one view, are averaged."""
     mu = np.asarray(model.energy_cosines())
     phi = energy_azimuths(params)
     wo = spherical(np.repeat(side * mu, len(phi)), np.tile(phi, len(mu)))
-    left, lobes = left_of(params, wo), lobes_of(params, wo)
+
+    def albedos(stack):
+        return _normal_view_averaged(left_of(stack, wo), mu), _normal_view_averaged(lobes_of(stack, wo), mu)
+
+    left, lobes = albedos(params)
     limit, whiteness = 1.0, whiteness_of(params)
     if model.conserving(params) and whiteness.max() > NEGLIGIBLE_WHITENESS:
         if np.all(whiteness == 1.0):  # already white: the white stack is this one
             limit = white_limit(left, lobes, whiteness)
         else:
-            plain = model.white(params)
-            limit = white_limit(left_of(plain, wo), lobes_of(plain, wo), whiteness)
+            limit = white_limit(*albedos(model.white(params)), whiteness)
     table = energy_scale(left, lobes, limit).reshape(len(mu), len(phi), 3)
     return table if per_azimuth else table.min(axis=1)
+
+
+def _normal_view_averaged(albedo, mu):
+    """Albedos (K P, 3) on the knots (``energy_table``'s order) with the P estimates at μ = 1, which all see along
+    the normal, replaced by their mean (P times the samples: less noise)."""
+    per_knot = albedo.reshape(len(mu), -1, 3).copy()
+    if mu[-1] == 1.0:
+        per_knot[-1] = per_knot[-1].mean(axis=0)
+    return per_knot.reshape(albedo.shape)
 
 
 # Below this whiteness the white stack's limit differs from 1 by less than this share of (ratio - 1): 1 is taken.

@@ -175,7 +175,7 @@ class MsSizes:
     failure_wi: int = 4  # a square number: incident directions per configuration
     failure_wo: int = 64  # twice a square number: outgoing directions over the sphere
     furnace_configs: int = 6  # random non-absorbing stacks per layer count
-    furnace_samples: int = 4096  # directional-albedo samples per wo (the model's own estimate)
+    furnace_samples: int = 32768  # directional-albedo samples per wo (the model's own estimate; ~0.1% noise)
     furnace_paths: int = 20000  # random-walk paths per wo (ground-truth albedo)
     presets: tuple = ("fabric", "window_shade")
     truth: object = None  # spongecake_truth.TruthSettings of the rendered comparison (None: RENDER_TRUTH)
@@ -524,24 +524,26 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for label, sm in summ.items():
         lines.append(f"| {label} | {pct(sm['ss_ms']['mean_vs_1'])} | {pct(sm['ss_ms']['worst_vs_1'])} | "
-                     f"{sm['ss_ms']['max']:.3f} | {pct(sm['cycles']['mean_vs_1'])} | "
-                     f"{pct(sm['cycles']['worst_vs_1'])} | {sm['cycles']['max']:.3f} | "
+                     f"{sm['ss_ms']['max']:.4f} | {pct(sm['cycles']['mean_vs_1'])} | "
+                     f"{pct(sm['cycles']['worst_vs_1'])} | {sm['cycles']['max']:.4f} | "
                      f"{pct(sm['ss_ms']['mean_vs_truth'])} | {pct(sm['ss']['mean_vs_1'])} | "
                      f"{pct(sm['truth']['mean_vs_1'])} | {pct(sm['network']['mean_vs_1'])} | "
                      f"{pct(sm['network']['worst_vs_1'])} | {sm['network']['max']:.3f} |")
     worst_view = max(rows, key=lambda r: abs(1.0 - r["ss_ms"]))
     lines += ["", f"Goal {'met' if met('ss_ms') else '**not met**'} in the reference (mean "
               f"{pct(summ['all']['ss_ms']['mean_vs_1'])}, worst {pct(summ['all']['ss_ms']['worst_vs_1'])}, largest "
-              f"{summ['all']['ss_ms']['max']:.3f}; above {goal_max:g} in {pct(summ['all']['ss_ms']['gain_share'])} of the "
+              f"{summ['all']['ss_ms']['max']:.4f}; above {goal_max:g} in {pct(summ['all']['ss_ms']['gain_share'])} of the "
               f"(stack, view) cases), {'met' if met('cycles') else '**not met**'} in the OSL form (mean "
               f"{pct(summ['all']['cycles']['mean_vs_1'])}, worst {pct(summ['all']['cycles']['worst_vs_1'])}, largest "
-              f"{summ['all']['cycles']['max']:.3f}). The worst case is a {worst_view['layers']}-layer stack seen at θo = "
-              f"{worst_view['theta']:.0f}°. The energy scale (reference module docstring, [ms-energy]) makes "
-              "isotropic white stacks exact at its knots (what remains is the interpolation between them and the "
-              "estimates' noise); where a layer is oriented off the normal the reference tabulates the scale over the "
-              "view's azimuth too and takes the lesser of the two azimuth knots around the view (exact only at "
-              "them), while the Cycles forms, whose closure weights follow the view's angle only, take the least "
-              "over all azimuths and keep what the network under-predicts at the others."]
+              f"{summ['all']['cycles']['max']:.4f}). The worst case is a {worst_view['layers']}-layer stack seen at θo = "
+              f"{worst_view['theta']:.0f}°. The energy scale (reference module docstring, [ms-energy]) gives "
+              f"isotropic white stacks 1 less its margin ({pct(model.ENERGY_MARGIN)}, for the noise of its estimates) "
+              "at its knots; where a layer is oriented off the normal the reference tabulates the scale over the "
+              "view's azimuth too. Between the knots the reference interpolates bilinearly less an estimate of the "
+              "interpolation's error where the table is convex, so that a view between knots takes no more than "
+              "they allow; the Cycles forms, whose closure weights follow the view's angle only, interpolate "
+              "linearly in √μ, take the least over all azimuths and keep what the network under-predicts at the "
+              "others."]
     # --- rendered
     from ..reference.spongecake_truth import TruthSettings
 

@@ -39,8 +39,9 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
 * multiple scattering (Sec. 5): the network's lobe mapped like the layers, with the closure weights of the view
   along the normal (computed from the inputs alone: constants Cycles folds) [approx: ms-weights-at-normal], plus
   Lambert lobes, all scaled per view by the baked ``MS Energy`` inputs: the reference's energy scale built on this
-  form's own numpy prediction (``energy_values``), interpolated on the view like ``reference.spongecake.
-  energy_at``; a texture-driven bake keeps the material's own scale for every texel. [approx: ms-energy]
+  form's own numpy prediction (``energy_values``), linear in √μ between its knots (the reference's ``energy_at``
+  also subtracts the interpolation's error bound where the table is convex); a texture-driven bake keeps the
+  material's own scale for every texel. [approx: ms-energy]
 
 The node-group form also evaluates Schlick's F at h = flake normal [approx: schlick-at-view];
 the OSL form evaluates it per microfacet (generalized_schlick_bsdf).
@@ -104,8 +105,8 @@ APPROXIMATIONS = {
                                     {**_one(type="surface", roughness=0.3, thickness=0.3),
                                      "substrate": {"type": "dielectric", "roughness": 0.3, "ior": 1.5}}),
     "ms-energy": ("multiple scattering's energy scale on the form's own single scattering (not the reference's), "
-                  "on 8 view cosines (least over view azimuths, which the reference follows); one per material in "
-                  "texture-driven bakes",
+                  "on 8 view cosines, linear between them (least over view azimuths; the reference follows the "
+                  "azimuth and bounds the interpolation's error); one per material in texture-driven bakes",
                   {**_one(type="surface", roughness=0.5, thickness=1.0), "multiple_scattering": True}),
     "ms-weights-at-normal": ("the multiple-scattering closures' weights are the layer math's for the view along "
                              "the normal (constants Cycles folds), their total restored per view by the energy "
@@ -334,8 +335,8 @@ ENERGY_QUADRATURE = (32, 64)
 def energy_values(p: model.Params) -> dict:
     """The ``MS Energy`` inputs: the reference's energy scale (``reference.spongecake.energy_tables``) computed on
     what Cycles renders (its numpy prediction, OSL form): what the form's single scattering and Dirac leave, over
-    the albedo of its multiple-scattering closures, so that the rendered furnace stays at most 1 (and is 1 for a
-    white isotropic stack at the knots) whatever the single-scattering mapping's error."""
+    the albedo of its multiple-scattering closures, so that the rendered furnace stays at most 1 (and is 1 less
+    ``ENERGY_MARGIN`` for a white isotropic stack at the knots) whatever the single-scattering mapping's error."""
     from ..bake.spongecake import energy_table
 
     scale = energy_table(p, _left, _ms_furnace)
@@ -427,7 +428,8 @@ def _multiple_scattering(b, p: model.Params) -> None:
 
 def _energy(b, mu):
     """The ``MS Energy`` inputs interpolated at the view: linear in √μ between the knots of
-    ``model.energy_cosines``, the first knot's value closer to grazing (``reference.spongecake.energy_at``), as a
+    ``model.energy_cosines``, the first knot's value closer to grazing (``reference.spongecake.energy_at`` before
+    its error bound), as a
     chain of clamped mixes (knot k takes over from k − 1 as x = (√μ − √μ₀) / step passes k − 1 .. k)."""
     lo = math.sqrt(model.MIN_ENERGY_COS)
     per_step = (len(MS_ENERGY) - 1) / (1.0 - lo)

@@ -18,14 +18,16 @@ Conventions (local frame, z = macro normal; ``wi`` points to the light, ``wo`` t
 * With ``multiple_scattering``, ``eval`` adds the network's two lobes (Sec. 5) and ``sample``/``pdf`` still
   sample single scattering only, as the paper does (Sec. 4.5); the sample weight uses the full f.
 * Energy (``energy_tables``; not in the paper): the network's lobes are scaled per view by
-  s(ωo) = min(left(ωo) / E(ωo), limit), tabulated on ``ENERGY_KNOTS`` view cosines (linear in √|μo|) and, where a
-  layer is oriented off the normal, ``ENERGY_AZIMUTHS`` view azimuths (the lesser of the two around the view).
-  left = 1 − A_ss − T_δ is what single scattering and the Dirac leave (whether the Dirac is rendered or not), E the
-  directional albedo of the network's lobes: single plus multiple scattering never return more than they receive.
+  s(ωo) = min((left(ωo) − m) / E(ωo), limit), tabulated on ``ENERGY_KNOTS`` view cosines and, where a layer is
+  oriented off the normal, ``ENERGY_AZIMUTHS`` view azimuths, interpolated bilinearly in √|μo| and the azimuth
+  less the interpolation's error bound where the table is convex (``energy_at``). left = 1 − A_ss − T_δ is what
+  single scattering and the Dirac leave (whether the Dirac is rendered or not), E the directional albedo of the
+  network's lobes, m = ``ENERGY_MARGIN`` (0.3%) a margin for the noise of their estimates: single plus multiple
+  scattering never return more than they receive.
   The limit is 1 (the network's energy wherever it fits in), except for stacks that conserve energy once white
   (``models.spongecake.conserving``: no Fresnel flakes, no substrate or a diffuse one), where it moves towards
   left_white / E_white, the scale that gives the white stack exactly its leftover, by the stack's whiteness
-  (``bake.spongecake.whiteness_of``): a white isotropic stack returns exactly what it receives at the knots. The
+  (``bake.spongecake.whiteness_of``): a white isotropic stack returns what it receives less m at the knots. The
   scale follows the view alone, as a Cycles closure weight does, so the scaled lobes are reciprocal only where it
   is the same at both directions. [named: ms-energy]
 * Sampling picks a lobe with P(first collision in layer k) = (1 - tau_k(wi)) prod_{j between} tau_j(wi), the
@@ -244,20 +246,35 @@ ENERGY_SAMPLES = 4096  # directions per view of the albedos behind the energy ta
 
 def energy_at(table, w):
     """A table over ``energy_cosines`` and the azimuths of ``bake.spongecake.energy_azimuths`` (K, P, 3) at
-    directions w (N, 3): linear in √|cos θ| (clamped at the ends); between two azimuth knots the lesser of their
-    values, so that a view between them takes no more than either knot allows."""
+    directions w (N, 3): bilinear in √|cos θ| (clamped at the ends) and the azimuth, less an estimate of linear
+    interpolation's error where the table is convex, f (1 − f) / 2 times its largest second difference at the
+    view's four knots in each coordinate (f the view's place between two knots; exact for a quadratic in √|cos θ|),
+    so that a view between knots takes no more than the scale there allows."""
     knots = np.sqrt(energy_cosines())
-    u = np.sqrt(np.abs(w[:, 2]))
     n_phi = table.shape[1]
-    j = np.floor(np.mod(np.arctan2(w[:, 1], w[:, 0]), 2.0 * np.pi) * (n_phi / (2.0 * np.pi))).astype(int) % n_phi
-    return np.minimum(_at_azimuth(table, j, u, knots), _at_azimuth(table, (j + 1) % n_phi, u, knots))
-
-
-def _at_azimuth(table, index, u, knots):
-    """The (K, P, 3) table's column ``index`` (N,) per direction, linear in u = √|cos θ| between ``knots``."""
+    u = np.sqrt(np.abs(w[:, 2]))
     k = np.clip(np.searchsorted(knots, u) - 1, 0, len(knots) - 2)
-    s = np.clip((u - knots[k]) / (knots[k + 1] - knots[k]), 0.0, 1.0)[:, None]
-    return (1.0 - s) * table[k, index] + s * table[k + 1, index]
+    g = np.clip((u - knots[k]) / (knots[k + 1] - knots[k]), 0.0, 1.0)[:, None]
+    x = np.mod(np.arctan2(w[:, 1], w[:, 0]), 2.0 * np.pi) * (n_phi / (2.0 * np.pi))
+    j = np.floor(x).astype(int) % n_phi
+    f = (x - np.floor(x))[:, None]
+    corners = [(k, j, (1.0 - g) * (1.0 - f)), (k, (j + 1) % n_phi, (1.0 - g) * f),
+               (k + 1, j, g * (1.0 - f)), (k + 1, (j + 1) % n_phi, g * f)]
+    bend_u, bend_phi = _second_differences(table)
+    value = sum(weight * table[a, b] for a, b, weight in corners)
+    convex_u = np.maximum.reduce([bend_u[a, b] for a, b, _ in corners] + [np.zeros_like(value)])
+    convex_phi = np.maximum.reduce([bend_phi[a, b] for a, b, _ in corners] + [np.zeros_like(value)])
+    return np.maximum(value - 0.5 * g * (1.0 - g) * convex_u - 0.5 * f * (1.0 - f) * convex_phi, 0.0)
+
+
+def _second_differences(table):
+    """(along the view cosine's knots, along the azimuths) second differences of a (K ≥ 4, P, 3) table: linearly
+    extrapolated to the first and last knots; the azimuths wrap around (0 where P = 1)."""
+    along_u = np.zeros_like(table)
+    along_u[1:-1] = table[:-2] - 2.0 * table[1:-1] + table[2:]
+    along_u[0], along_u[-1] = 2.0 * along_u[1] - along_u[2], 2.0 * along_u[-2] - along_u[-3]
+    along_phi = np.roll(table, 1, axis=1) - 2.0 * table + np.roll(table, -1, axis=1)
+    return along_u, along_phi
 
 
 def energy_tables(params: Params):

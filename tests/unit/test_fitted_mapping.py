@@ -127,6 +127,20 @@ def test_a_changed_value_is_a_different_fit():
     assert choice.fit_key(thin_coat.ID, p, "osl") != choice.fit_key(thin_coat.ID, p, "nodes")
 
 
+def test_a_fit_with_multiple_scattering_follows_what_that_comes_from(monkeypatch):
+    """The reference a fit matches includes the network's multiple scattering and its energy scale: a new version of
+    either is a different fit; a material without multiple scattering keeps its fit."""
+    from addon.bake import spongecake as bake
+
+    with_ms = _preset(spongecake, "fabric")
+    with_ms = spongecake.params_from_dict({**with_ms.to_dict(), "multiple_scattering": True})
+    without = spongecake.params_from_dict({**with_ms.to_dict(), "multiple_scattering": False})
+    keys = [choice.fit_key(spongecake.ID, q, "osl") for q in (with_ms, without)]
+    monkeypatch.setattr(bake, "MS_VERSION", bake.MS_VERSION + 1)
+    assert choice.fit_key(spongecake.ID, with_ms, "osl") != keys[0]
+    assert choice.fit_key(spongecake.ID, without, "osl") == keys[1]
+
+
 BAD = {
     "black": {"layers": [{"type": "surface", "roughness": 0.3, "thickness": 1.0, "albedo": [0, 0, 0]}],
               "substrate": {"type": "diffuse", "albedo": [0, 0, 0]}},
