@@ -28,7 +28,7 @@ MIN_ENERGY_COS = 0.02
 ENERGY_AZIMUTHS = 32  # view azimuths per knot where a layer is oriented off the normal (``energy_tables``)
 # The share of the received light the scale leaves unreturned (``bake.spongecake.energy_scale``): twice the largest
 # standard deviation (0.16%) of the tables' 4096-sample estimates of what single scattering leaves, measured over the
-# 32 azimuths of the normal view of the white furnace bench's oriented stacks.
+# 32 azimuths of the normal view of the white furnace bench's oriented stacks (measured once during development).
 ENERGY_MARGIN = 0.003
 OPAQUE_SUBSTRATES = ("diffuse", "conductor")  # a dielectric substrate refracts light through the stack
 

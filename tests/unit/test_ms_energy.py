@@ -2,8 +2,9 @@
 ``MS Energy`` inputs of the Cycles forms (``nodes.spongecake.energy_values``).
 
 White furnaces are estimated with the reference's own stratified estimator (``furnace_albedo``, 4096 directions per
-view: about 0.3 % noise; 16384 where a test bounds the largest value) and with the numpy prediction of what Cycles renders; every stack here was checked to
-gain or lose energy without the scale (``UNSCALED_GLOW``), so the tests fail if the scale is left out."""
+view: about 0.3 % noise; 16384 where a test bounds the largest value) and with the numpy prediction of what Cycles
+renders; every stack here was checked to gain or lose energy without the scale (``UNSCALED_GLOW``), so the tests
+fail if the scale is left out."""
 from dataclasses import replace
 
 import numpy as np
@@ -170,7 +171,8 @@ def _bilinear(table, u, phi):
     n_phi = table.shape[1]
     x = np.mod(phi, 2.0 * np.pi) * n_phi / (2.0 * np.pi)
     j, f = np.floor(x).astype(int) % n_phi, x - np.floor(x)
-    along_u = [np.array([np.interp(v, knots, table[:, jj, 0]) for v, jj in zip(u, col)]) for col in (j, (j + 1) % n_phi)]
+    along_u = [np.array([np.interp(v, knots, table[:, jj, 0]) for v, jj in zip(u, column)])
+               for column in (j, (j + 1) % n_phi)]
     return (1.0 - f) * along_u[0] + f * along_u[1]
 
 
