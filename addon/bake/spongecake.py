@@ -70,6 +70,12 @@ def network(n_layers: int) -> mlp.MLP:
     return mlp.load(weights_path(min(n_layers, NETWORK_LAYERS)))
 
 
+def ms_identity(n_layers: int) -> list:
+    """What a stack's multiple scattering comes from: the manifest of the network that predicts it and the version
+    of what is made from the prediction (``MS_VERSION``, e.g. the energy scale); part of bake keys and fit keys."""
+    return [network(n_layers).manifest, MS_VERSION]
+
+
 # ------------------------------------------------------------------------------------------- encoding
 
 def _log_unit(x, lo, hi, xp=np):

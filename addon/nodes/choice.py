@@ -43,22 +43,15 @@ def cache_folder() -> Path:
 def fit_key(model_id: str, p, form: str, driven: fitted.Driven | None = None) -> str:
     """What a fit depends on: the parameters, the form, whether node groups have the Metallic BSDF, the fitter, a
     driven input's tabulated values (the input's own constant does not count then) and, with multiple scattering,
-    what the reference's multiple scattering comes from (``_multiple_scattering_source``)."""
+    what the reference's multiple scattering comes from (the bake module's ``ms_identity``)."""
     from .expr import NumpyBackend
 
     if driven is not None:
         p = at(model_id, p, driven, len(driven.values) // 2)
     parts = [FITTER_VERSION, model_id, p.to_dict(), form, NumpyBackend.metallic_node, driven and driven.to_json()]
     if getattr(p, "multiple_scattering", False):
-        parts.append(_multiple_scattering_source(model_id, p))
+        parts.append(importlib.import_module(f"..bake.{model_id}", __package__).ms_identity(len(p.layers)))
     return __import__("hashlib").sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()[:24]
-
-
-def _multiple_scattering_source(model_id: str, p) -> list:
-    """The network that predicts the material's multiple scattering (its manifest) and the version of what is made
-    from the prediction (``MS_VERSION``, e.g. the energy scale)."""
-    bake = importlib.import_module(f"..bake.{model_id}", __package__)
-    return [bake.MS_VERSION, bake.network(len(p.layers)).manifest]
 
 
 def driven_over(model_id: str, p, socket: str, lo: float, hi: float) -> fitted.Driven:

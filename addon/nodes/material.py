@@ -511,12 +511,11 @@ _ms_shares: dict[str, float] = {}
 
 
 def ms_key(model_id: str, p) -> str:
-    """Identifies a multiple-scattering bake: the parameters, the manifest of the network that predicts them and the
-    version of what is baked from its prediction (``MS_VERSION``) and the generator whose shader the baked energy
-    scale fits (``GENERATOR_VERSION``)."""
+    """Identifies a multiple-scattering bake: the parameters, what their multiple scattering comes from (the bake
+    module's ``ms_identity``: network and ``MS_VERSION``) and the generator whose shader the baked energy scale fits
+    (``GENERATOR_VERSION``)."""
     bake = importlib.import_module(f"..bake.{model_id}", __package__)
-    text = json.dumps([p.to_dict(), bake.network(len(p.layers)).manifest, bake.MS_VERSION, GENERATOR_VERSION],
-                      sort_keys=True)
+    text = json.dumps([p.to_dict(), *bake.ms_identity(len(p.layers)), GENERATOR_VERSION], sort_keys=True)
     return hashlib.md5(text.encode()).hexdigest()
 
 
