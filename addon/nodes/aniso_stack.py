@@ -28,6 +28,7 @@ generated (``table_fit``): arithmetic only, the same in OSL, math nodes and nump
 """
 from __future__ import annotations
 
+import hashlib
 import math
 from functools import lru_cache
 
@@ -345,14 +346,19 @@ def evaluate_fit(b, fit: np.ndarray, mu, alpha, columns=None):
 
 
 def fit_columns(b, fit: np.ndarray, mu) -> list:
-    """Per power of the roughness variable, its coefficient as a polynomial in the cosine variable (Horner)."""
-    tx = _unit_x(b.sqrt(b.minimum(mu, 1.0)))
+    """Per power of the roughness variable, its coefficient as a polynomial in the cosine variable (Horner); one
+    shared computation per fit (a nested group in node groups)."""
     scalar = fit.shape[2] == 1
 
     def constant(c):
         return float(c[0]) if scalar else tuple(float(v) for v in c)
 
-    return [_horner(b, [constant(c) for c in fit[:, j]], tx) for j in range(fit.shape[1])]
+    def columns(b, mu):
+        tx = _unit_x(b.sqrt(b.minimum(mu, 1.0)))
+        return [_horner(b, [constant(c) for c in fit[:, j]], tx) for j in range(fit.shape[1])]
+
+    digest = hashlib.md5(np.ascontiguousarray(fit, dtype=np.float64).tobytes()).hexdigest()[:8]
+    return b.shared(f"Lamina table {digest}", columns, mu)
 
 
 def _horner(b, terms, t):

@@ -111,6 +111,10 @@ class NumpyBackend(NumpyMath):
         angle = np.broadcast_to(angle, (self.n,))
         return np.stack([np.cos(angle), np.sin(angle), np.zeros(self.n)], axis=1)
 
+    def shared(self, name: str, body, *args) -> list:
+        """``body(self, *args)``: a list of values (node groups build it once, as a nested group ``name``)."""
+        return body(self, *args)
+
     def ramp(self, values, x):
         """The piecewise linear colour through ``values`` (K, 3) on K uniform knots in [0, 1], at ``x`` clamped to
         [0, 1] (a Color Ramp)."""
@@ -411,6 +415,10 @@ class OslBackend:
 
     def has_metal(self) -> bool:
         return True
+
+    def shared(self, name: str, body, *args) -> list:
+        """``NumpyBackend.shared``: inline."""
+        return body(self, *args)
 
     def ramp(self, values, x):
         """``NumpyBackend.ramp``: a constant array of colours, interpolated linearly."""

@@ -77,17 +77,44 @@ class NodeBackend:
         self._frame = None
         self._made: dict[tuple, NodeValue] = {}  # pure math nodes by operation and inputs (``_pure``)
         self._lamberts: dict[str, object] = {}  # summed colours of closures without parameters (``_lambert``)
+        self._locations: dict[str, tuple] = {}  # node name → location, written by ``finish``
 
     # -- layout
+    # Every write to a node or link makes Blender update the whole tree, so building a tree costs its size squared:
+    # a new node is renamed at once (Blender's search for a free "Math.NNN" name grows with the nodes of that name)
+    # and the locations are written together in ``finish`` (one write for the tree).
     def _node(self, bl_idname: str, depth: int, **props):
         node = self.nodes.new(bl_idname)
+        node.name = f"n{len(self.nodes)}"
         for k, v in props.items():
             setattr(node, k, v)
         row = self._rows.get(depth, 0)
         self._rows[depth] = row + 1
-        node.location = (depth * COLUMN, -row * ROW)
+        self._locations[node.name] = (depth * COLUMN, -row * ROW)
         node.hide = bl_idname in ("ShaderNodeMath", "ShaderNodeVectorMath")
         return node
+
+    def shared(self, name: str, body, *args) -> list:
+        """``body(backend, *args)`` (a list of float or colour values) as a Group node of the nested group ``name``,
+        made on first use and then reused by every tree of the file: the caller's tree stays small (see ``_node``).
+        ``name`` must identify what ``body`` computes."""
+        group = bpy.data.node_groups.get(name) or _shared_group(name, body, [_kind(a) for a in args])
+        depth = _depth(*args) + 1
+        node = self._node("ShaderNodeGroup", depth)
+        node.node_tree = group
+        for value, socket in zip(args, node.inputs):
+            self._link_or_set(value, socket)
+        kinds = [SHARED_KINDS[item.socket_type] for item in group.interface.items_tree if item.in_out == "OUTPUT"]
+        return [NodeValue(self, socket, kind, depth) for socket, kind in zip(node.outputs, kinds)]
+
+    def _place_nodes(self):
+        """Write the locations ``_node`` chose, leaving the other nodes where they are."""
+        flat = [0.0] * (2 * len(self.nodes))
+        self.nodes.foreach_get("location", flat)
+        for i, node in enumerate(self.nodes):
+            if node.name in self._locations:
+                flat[2 * i:2 * i + 2] = self._locations[node.name]
+        self.nodes.foreach_set("location", flat)
 
     def _link_or_set(self, value, socket):
         if isinstance(value, NodeValue):
@@ -324,8 +351,9 @@ class NodeBackend:
             self._closure(bl_idname, {"Color": color})
         self._lamberts.clear()
         if self._shader is not None:
-            self.group_output.location = ((self._shader[1] + 1) * COLUMN, 0)
+            self._locations[self.group_output.name] = ((self._shader[1] + 1) * COLUMN, 0)
             self.links.new(self._shader[0], self.group_output.inputs["BSDF"])
+        self._place_nodes()
 
     def _roughness(self, alpha):
         return self.sqrt(alpha)  # closures in nodes take Blender's roughness r, with α = r² (research notes §6)
@@ -445,6 +473,26 @@ class NodeBackend:
     def dielectric(self, color, alpha, ior):
         self._closure("ShaderNodeBsdfGlass", {"Color": color, "Roughness": self._roughness(alpha), "IOR": ior},
                       distribution="GGX")
+
+
+SHARED_SOCKETS = {"float": "NodeSocketFloat", "color": "NodeSocketVector"}  # colours as data (``shared``)
+SHARED_KINDS = {socket: kind for kind, socket in SHARED_SOCKETS.items()}
+
+
+def _shared_group(name: str, body, kinds: list[str]):
+    """The nested group of ``NodeBackend.shared``: inputs of ``kinds``, outputs what ``body`` returns."""
+    group = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    for i, kind in enumerate(kinds):
+        group.interface.new_socket(f"Input {i + 1}", in_out="INPUT", socket_type=SHARED_SOCKETS[kind])
+    group_in, group_out = group.nodes.new("NodeGroupInput"), group.nodes.new("NodeGroupOutput")
+    b = NodeBackend(group, group_in, group_out)
+    values = body(b, *(NodeValue(b, group_in.outputs[i], kind, 0) for i, kind in enumerate(kinds)))
+    for j, value in enumerate(values):
+        group.interface.new_socket(f"Output {j + 1}", in_out="OUTPUT", socket_type=SHARED_SOCKETS[_kind(value)])
+        b._link_or_set(value, group_out.inputs[j])
+    b._locations[group_out.name] = ((1 + max((_depth(v) for v in values), default=0)) * COLUMN, 0)
+    b._place_nodes()
+    return group
 
 
 def _identity(v):
