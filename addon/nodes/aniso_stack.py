@@ -342,7 +342,12 @@ def evaluate_fit(b, fit: np.ndarray, mu, alpha, columns=None):
     """The fitted polynomial at (µ, α) on backend ``b``: a float for one channel, else a colour. ``columns``: those
     of ``fit_columns(b, fit, mu)`` when already built (lookups at the same µ share them)."""
     columns = fit_columns(b, fit, mu) if columns is None else columns
-    return _horner(b, columns, _unit_y(b.sqrt(b.minimum(b.maximum(alpha, tables.MIN_ALPHA), 1.0))))
+
+    def in_alpha(b, alpha, *columns):
+        return [_horner(b, list(columns), _unit_y(b.sqrt(b.minimum(b.maximum(alpha, tables.MIN_ALPHA), 1.0))))]
+
+    kind = "float" if fit.shape[2] == 1 else "color"
+    return b.shared(f"Lamina polynomial {len(columns)} {kind} {tables.MIN_ALPHA:g}", in_alpha, alpha, *columns)[0]
 
 
 def fit_columns(b, fit: np.ndarray, mu) -> list:
