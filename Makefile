@@ -28,10 +28,10 @@ $(VENV42)/.stamp: requirements-blender-4.2.txt
 	$(PY42) -m pip install --quiet -r requirements-blender-4.2.txt
 	touch $@
 
-# The unit tests in two halves by file name (test_a* to test_m*, then the rest), so that each core takes one after
-# its Blender suite.
-UNIT_1 := $(wildcard tests/unit/test_[a-m]*.py)
-UNIT_2 := $(filter-out $(UNIT_1),$(wildcard tests/unit/test_*.py))
+# The unit tests in two halves of about equal time by file name (test_me* and test_mi* (media, micrograin) and
+# test_n* to test_z*, then the rest), so that each core takes one after its Blender suite.
+UNIT_2 := $(wildcard tests/unit/test_me*.py tests/unit/test_mi*.py tests/unit/test_[n-z]*.py)
+UNIT_1 := $(filter-out $(UNIT_2),$(wildcard tests/unit/test_*.py))
 
 # Four runs on the two cores, the longest first: the Blender tests on bpy 5.0 and on Blender 4.2 LTS (the oldest
 # supported; tests marked version_independent run on 5.0 only, tests/blender/conftest.py), then each half of the unit
