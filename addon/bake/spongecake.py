@@ -55,7 +55,8 @@ ALPHA_RANGE = (0.01, 1.0)
 G_MAX = 0.95
 THICKNESS_IN = (0.01, 10.0)
 THICKNESS_OUT = (0.01, 20.0)
-MS_VERSION = 3  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin
+MS_VERSION = 4  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
+# stack's scale over the view's azimuth too (``nodes.spongecake.view_inputs``)
 NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 
@@ -276,14 +277,19 @@ def whiteness_of(params: model.Params) -> np.ndarray:
 
 def energy_table(params: model.Params, left_of, lobes_of, side: float = 1.0, per_azimuth: bool = False) -> np.ndarray:
     """The energy scale on ``models.spongecake.energy_cosines`` for views above (side 1) or below (-1):
-    ``energy_scale`` of ``left_of(params, wo)`` and ``lobes_of(params, wo)`` (the reference's or a Cycles form's,
-    (N, 3) each), limited by ``white_limit`` where the stack conserves energy once white. Where a layer is oriented
-    off the normal the scale depends on the view's azimuth: at ``ENERGY_AZIMUTHS`` azimuths (``energy_azimuths``),
-    (``ENERGY_KNOTS``, P, 3) with ``per_azimuth`` (P = 1 for isotropic stacks), else the least over them,
-    (``ENERGY_KNOTS``, 3), so that no azimuth gains energy (a closure weight that follows the view's angle only).
-    The P estimates at the normal view, one view, are averaged."""
-    mu = np.asarray(model.energy_cosines())
-    phi = energy_azimuths(params)
+    ``energy_grid`` on those knots. Where a layer is oriented off the normal the scale depends on the view's azimuth:
+    at ``ENERGY_AZIMUTHS`` azimuths (``energy_azimuths``), (``ENERGY_KNOTS``, P, 3) with ``per_azimuth`` (P = 1 for
+    isotropic stacks), else the least over them, (``ENERGY_KNOTS``, 3), so that no azimuth gains energy (a closure
+    weight that follows the view's angle only)."""
+    table = energy_grid(params, left_of, lobes_of, np.asarray(model.energy_cosines()), energy_azimuths(params), side)
+    return table if per_azimuth else table.min(axis=1)
+
+
+def energy_grid(params: model.Params, left_of, lobes_of, mu, phi, side: float = 1.0) -> np.ndarray:
+    """The energy scale (len(mu), len(phi), 3) at the view cosines ``mu`` (increasing; a last 1 is the normal view)
+    and azimuths ``phi``: ``energy_scale`` of ``left_of(params, wo)`` and ``lobes_of(params, wo)`` (the reference's
+    or a Cycles form's, (N, 3) each), limited by ``white_limit`` where the stack conserves energy once white. The
+    len(phi) estimates at the normal view, one view, are averaged."""
     wo = spherical(np.repeat(side * mu, len(phi)), np.tile(phi, len(mu)))
 
     def albedos(stack):
@@ -296,13 +302,12 @@ def energy_table(params: model.Params, left_of, lobes_of, side: float = 1.0, per
             limit = white_limit(left, lobes, whiteness)
         else:
             limit = white_limit(*albedos(model.white(params)), whiteness)
-    table = energy_scale(left, lobes, limit).reshape(len(mu), len(phi), 3)
-    return table if per_azimuth else table.min(axis=1)
+    return energy_scale(left, lobes, limit).reshape(len(mu), len(phi), 3)
 
 
 def _normal_view_averaged(albedo, mu):
-    """Albedos (K P, 3) on the knots (``energy_table``'s order) with the P estimates at μ = 1, which all see along
-    the normal, replaced by their mean (P times the samples: less noise)."""
+    """Albedos (len(mu) P, 3) in ``energy_grid``'s order with the P estimates at μ = 1, which all see along the
+    normal, replaced by their mean (P times the samples: less noise)."""
     per_knot = albedo.reshape(len(mu), -1, 3).copy()
     if mu[-1] == 1.0:
         per_knot[-1] = per_knot[-1].mean(axis=0)

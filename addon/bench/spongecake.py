@@ -195,6 +195,7 @@ FAILURE_CASES = tuple(
         [{"type": "fiber", "roughness": 0.05, "thickness": 1.0, "albedo": [0.9] * 3, "orientation": [1, 0, 0]},
          {"type": "fiber", "roughness": 0.1, "thickness": 3.0, "albedo": [0.9] * 3, "orientation": [1, 0, 0]}])])
 FURNACE_THETAS = (0.0, 45.0, 75.0, 85.0)  # view angles of the white furnace (degrees; 85 = grazing)
+FURNACE_AZIMUTHS = (30.0, 120.0, 210.0, 300.0)  # view azimuths of oriented stacks in the white furnace (degrees)
 FURNACE_THICKNESS = (0.05, 8.0)  # optical thickness of the white furnace's random layers (log-uniform)
 
 
@@ -312,9 +313,15 @@ def white_furnace_configs(n_configs: int, seed: int) -> list[dict]:
             for _ in range(n_configs)]
 
 
-def _furnace_directions() -> np.ndarray:
-    t = np.radians(np.asarray(FURNACE_THETAS))
-    phi = np.radians(30.0)
+def furnace_views(oriented: bool) -> list[tuple[float, float]]:
+    """(θo, φo) in degrees of the white furnace's views: each of ``FURNACE_THETAS``, at every one of
+    ``FURNACE_AZIMUTHS`` where a layer is oriented off the normal (the first only along the normal and for isotropic
+    stacks, which do not depend on the azimuth)."""
+    return [(t, phi) for t in FURNACE_THETAS for phi in (FURNACE_AZIMUTHS if oriented and t > 0 else FURNACE_AZIMUTHS[:1])]
+
+
+def _directions(views) -> np.ndarray:
+    t, phi = (np.radians([v[i] for v in views]) for i in (0, 1))
     return np.stack([np.sin(t) * np.cos(phi), np.sin(t) * np.sin(phi), np.cos(t)], axis=1)
 
 
@@ -329,10 +336,11 @@ def white_furnace(sizes: MsSizes) -> list[dict]:
     from ..nodes.closures_np import SHARP_ALBEDO
     from ..nodes.expr import closure_furnace
 
-    wo = _furnace_directions()
     out = []
     for i, config in enumerate(white_furnace_configs(sizes.furnace_configs, sizes.seed)):
         p = model.params_from_dict({**config, "multiple_scattering": True})
+        views = furnace_views(model.anisotropic(p))
+        wo = _directions(views)
         lit = model.params_from_dict({**config, "multiple_scattering": True, "delta_transmission": True})
         cycles = closure_furnace(lambda w, q=lit: _backend(model.ID, q, "osl", w), wo, quadratures=SHARP_ALBEDO)
         p_ss = model.params_from_dict(config)
@@ -343,8 +351,8 @@ def white_furnace(sizes: MsSizes) -> list[dict]:
         a_ss = reference.directional_albedo(p_ss, wo, n=sizes.furnace_samples, seed=i) + through
         truth = sum(reference.ground_truth_albedo(p_ss, wo, n_paths=sizes.furnace_paths, seed=1000 + i))
         network = a_ss + reference.network_albedo(p, predict(p), wo)  # the network's lobes before the energy scale
-        for k, theta in enumerate(FURNACE_THETAS):
-            out.append({"config": i, "layers": len(config["layers"]), "theta": theta,
+        for k, (theta, phi) in enumerate(views):
+            out.append({"config": i, "layers": len(config["layers"]), "theta": theta, "phi": phi,
                         "oriented": model.anisotropic(p),
                         "ss_ms": float(a_ms[k].mean()), "ss": float(a_ss[k].mean()),
                         "truth": float(truth[k].mean()), "cycles": float(cycles[k].mean()),
@@ -508,7 +516,9 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               f"albedo 1, f0 1, no substrate; flake α in [0.05, 1], hg g in [-0.8, 0.8], Tρ in "
               f"[{FURNACE_THICKNESS[0]:g}, {FURNACE_THICKNESS[1]:g}]; surface flakes along the normal or tilted, fibers "
               f"in the tangent plane, along the normal or tilted), each seen from θo = "
-              f"{', '.join(f'{t:g}°' for t in FURNACE_THETAS)} (azimuth 30°). The energy returned counts the "
+              f"{', '.join(f'{t:g}°' for t in FURNACE_THETAS)} (azimuth {FURNACE_AZIMUTHS[0]:g}°; stacks with a layer "
+              f"oriented off the normal at azimuths {', '.join(f'{a:g}°' for a in FURNACE_AZIMUTHS)} too, so they "
+              "count more views). The energy returned counts the "
               "unscattered light (the Dirac part), so the exact answer is 1. SS + MS: the model's directional albedo "
               f"with the network and its energy scale ({sizes.furnace_samples} samples per direction; its own noise, "
               f"from two halves: {pct(summ['all']['ss_ms']['noise'])} RMS) plus the unscattered light; OSL: the same "
@@ -536,14 +546,13 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               f"(stack, view) cases), {'met' if met('cycles') else '**not met**'} in the OSL form (mean "
               f"{pct(summ['all']['cycles']['mean_vs_1'])}, worst {pct(summ['all']['cycles']['worst_vs_1'])}, largest "
               f"{summ['all']['cycles']['max']:.4f}). The worst case is a {worst_view['layers']}-layer stack seen at θo = "
-              f"{worst_view['theta']:.0f}°. The energy scale (reference module docstring, [ms-energy]) gives "
+              f"{worst_view['theta']:.0f}°, φo = {worst_view['phi']:.0f}°. The energy scale (reference module docstring, [ms-energy]) gives "
               f"isotropic white stacks 1 less its margin ({pct(model.ENERGY_MARGIN)}, for the noise of its estimates) "
               "at its knots; where a layer is oriented off the normal the reference tabulates the scale over the "
               "view's azimuth too. Between the knots the reference interpolates bilinearly less an estimate of the "
               "interpolation's error where the table is convex, so that a view between knots takes no more than "
-              "they allow; the Cycles forms, whose closure weights follow the view's angle only, interpolate "
-              "linearly in √μ, take the least over all azimuths and keep what the network under-predicts at the "
-              "others."]
+              "they allow. The Cycles forms interpolate linearly in √μ; for an oriented stack they look the scale up "
+              "in a table over √μ and the azimuth (a packed float image, bilinear) without that estimate."]
     # --- rendered
     from ..reference.spongecake_truth import TruthSettings
 

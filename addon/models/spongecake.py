@@ -26,6 +26,9 @@ OPAQUE_THICKNESS = 30.0
 ENERGY_KNOTS = 8
 MIN_ENERGY_COS = 0.02
 ENERGY_AZIMUTHS = 32  # view azimuths per knot where a layer is oriented off the normal (``energy_tables``)
+# The Cycles forms' table of an oriented stack's scale (``nodes.spongecake.view_inputs``): rows uniform in √μ from
+# MIN_ENERGY_COS to 1 by azimuths, looked up bilinearly as a float image (``nodes.view_table``).
+VIEW_ENERGY_GRID = (32, 64)
 # The share of the received light the scale leaves unreturned (``bake.spongecake.energy_scale``): twice the largest
 # standard deviation (0.16%) of the tables' 4096-sample estimates of what single scattering leaves, measured over the
 # 32 azimuths of the normal view of the white furnace bench's oriented stacks (measured once during development).

@@ -46,7 +46,14 @@ def numpy_backend(model_id: str, p, form: str, wo):
 
     mapping = MAPPINGS[model_id]
     bulk = mapping.numpy_bulk(p, form) if hasattr(mapping, "numpy_bulk") else None
-    return NumpyBackend(wo, mapping.input_values(p), form, bulk)
+    return NumpyBackend(wo, {**mapping.input_values(p), **view_inputs(model_id, p)}, form, bulk)
+
+
+def view_inputs(model_id: str, p) -> dict:
+    """The inputs that the material feeds from a table over the view direction (the mapping's ``view_inputs``:
+    socket name → ``view_table.ViewTable``; ``view_wiring`` links them), none for most mappings."""
+    mapping = MAPPINGS[model_id]
+    return mapping.view_inputs(p) if hasattr(mapping, "view_inputs") else {}
 
 
 def _backend(model_id: str, p, form: str, wo, fit=None):

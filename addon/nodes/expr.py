@@ -45,7 +45,8 @@ LAMBERT_CLOSURES = ("diffuse", "translucent", "transparent")  # closures without
 
 
 class NumpyBackend(NumpyMath):
-    """Evaluate a mapping in float64 for N view directions ``wo`` (local frame, z = normal).
+    """Evaluate a mapping in float64 for N view directions ``wo`` (local frame, z = normal). ``inputs``: socket name
+    → value, or a ``view_table.ViewTable`` that the material feeds the input from (evaluated at ``wo``).
 
     ``metallic_node``: whether the node group predicted (form "nodes") has Blender 4.3+'s Metallic BSDF node (a
     Beckmann reflection with the dielectric Fresnel per microfacet); Blender 4.2's takes the Fresnel at the view
@@ -63,7 +64,8 @@ class NumpyBackend(NumpyMath):
 
     # -- inputs and geometry
     def input(self, name: str, kind: str):
-        v = np.asarray(self._inputs[name], dtype=np.float64)
+        v = self._inputs[name]
+        v = np.asarray(v.at(self.wo) if hasattr(v, "at") else v, dtype=np.float64)
         if kind == "float":
             return np.broadcast_to(v, (self.n,)).copy()
         return np.broadcast_to(v, (self.n, 3)).copy()

@@ -25,11 +25,11 @@ import numpy as np
 from ..bake.textures import BakeError
 from ..models import MODELS
 from ..models.micrograin import WRAPPED, Bulk
-from . import FORMS, MAPPING_KINDS, MAPPINGS, choice, fittable, fitted, image_values, osl, pruning, shade
+from . import (FORMS, MAPPING_KINDS, MAPPINGS, choice, fittable, fitted, image_values, osl, pruning, shade,
+               view_inputs, view_wiring)
 from .expr import BULK_INPUT, TANGENT_INPUT, NumpyBackend, OslBackend
-from .node_backend import NodeBackend
+from .node_backend import GENERATOR_VERSION, NodeBackend
 
-GENERATOR_VERSION = 5  # bump when generated shaders change, so cached groups are not reused
 GENERATOR_KEY = "lamina_generator"  # the GENERATOR_VERSION that built a material's Lamina node
 # What the numpy prediction (and so a fit) assumes of node groups follows the running Blender: 4.2 has no Metallic
 # BSDF node.
@@ -528,17 +528,28 @@ def bake_constants(mat) -> bool:
     model_id, p = current_params(mat)
     node = shader_node(mat)
     if not getattr(p, "multiple_scattering", False) or node is None:
-        return mat.pop(MS_KEY, None) is not None
+        unwired = node is not None and _wire_view_inputs(mat, node, {})
+        return mat.pop(MS_KEY, None) is not None or unwired
     values = MAPPINGS[model_id].ms_values(p)
     missing = any(socket_key(node, name) not in node.inputs for name in values)
     if missing or mat.get(GENERATOR_KEY) != GENERATOR_VERSION:
         _rebuild(mat, model_id, p, form_of(mat), mapping_of(mat), refit=False)
         return True
     changed = _write_values(node, values)
+    changed = _wire_view_inputs(mat, node, view_inputs(model_id, p)) or changed
     key = ms_key(model_id, p)
     if mat.get(MS_KEY) != key:
         mat[MS_KEY], changed = key, True
     return changed
+
+
+def _wire_view_inputs(mat, node, tables: dict) -> bool:
+    """Feed the node's inputs named in ``tables`` from their view tables (``view_wiring``), remove Lamina's lookups
+    that feed nothing any more (with their images); whether any link changed."""
+    before = {(link.from_node.name, link.to_socket.identifier) for s in node.inputs for link in s.links}
+    idle = view_wiring.wire(node, [(node.inputs[socket_key(node, name)], t) for name, t in tables.items()])
+    remove_nodes(mat, idle)
+    return before != {(link.from_node.name, link.to_socket.identifier) for s in node.inputs for link in s.links}
 
 
 def ms_enabled(mat) -> bool:
@@ -765,13 +776,14 @@ def socket_key(node, name: str) -> str:
 
 
 def _write_values(node, values: dict) -> bool:
-    """Set the node's unlinked inputs (a linked one is driven by its link); True if any value changed. Equal
-    values are not rewritten, so a repeated bake triggers no depsgraph update."""
+    """Set the node's unlinked inputs (a linked one is driven by its link; one fed by Lamina's view lookup keeps the
+    value it falls back to without it); True if any value changed. Equal values are not rewritten, so a repeated
+    bake triggers no depsgraph update."""
     changed = False
     for name, value in values.items():
         socket = node.inputs[socket_key(node, name)]
         new = _socket_value(value, socket.default_value)
-        if socket.is_linked or _same(socket.default_value, new):
+        if (socket.is_linked and not view_wiring.fed(socket)) or _same(socket.default_value, new):
             continue
         socket.default_value = new
         changed = True

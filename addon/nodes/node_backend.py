@@ -8,6 +8,7 @@ import bpy
 from .expr import (BULK_INPUT, MAX_CONDUCTOR_WEIGHT, MAX_MIX_WEIGHT, METAL_MIN_RATIO, MIN_COS, MIN_LOG, MIN_TANGENT,
                    lobe_fresnel, schlick_at_view)
 
+GENERATOR_VERSION = 5  # bump when generated shaders change, so cached groups are not reused
 COLUMN = 190
 ROW = 150
 
@@ -98,7 +99,7 @@ class NodeBackend:
         """``body(backend, *args)`` (a list of float or colour values) as a Group node of the nested group ``name``,
         made on first use and then reused by every tree of the file: the caller's tree stays small (see ``_node``).
         ``name`` must identify what ``body`` computes."""
-        group = bpy.data.node_groups.get(name) or _shared_group(name, body, [_kind(a) for a in args])
+        group = shared_group(name, body, [_kind(a) for a in args])
         depth = _depth(*args) + 1
         node = self._node("ShaderNodeGroup", depth)
         node.node_tree = group
@@ -156,6 +157,23 @@ class NodeBackend:
 
     def normal(self):
         return NodeValue(self, self.geometry()[0], "color", 1)
+
+    def tangent(self):
+        """The Geometry node's tangent, the x axis of the closures' tangent frame (``direction``)."""
+        return NodeValue(self, self.geometry()[2], "color", 1)
+
+    def cross(self, a, b):
+        return self._vector("CROSS_PRODUCT", a, b)
+
+    def fract(self, x):
+        return self._math("FRACT", x)
+
+    def combine(self, x, y, z):
+        """A vector of three floats (Combine XYZ)."""
+        node = self._node("ShaderNodeCombineXYZ", _depth(x, y, z))
+        for value, socket in zip((x, y, z), node.inputs):
+            self._link_or_set(value, socket)
+        return NodeValue(self, node.outputs[0], "color", _depth(x, y, z))
 
     def view(self):
         """The unit view direction ωo: the Geometry node's Incoming."""
@@ -278,9 +296,8 @@ class NodeBackend:
 
     def rotated_tangent(self, angle):
         """The Geometry node's tangent turned by ``angle`` about the normal: cos·T + sin·(N × T)."""
-        n = self.normal()
-        t = NodeValue(self, self.geometry()[2], "color", 1)
-        return self.scale(t, self.cos(angle)) + self.scale(self._vector("CROSS_PRODUCT", n, t), self.sin(angle))
+        n, t = self.normal(), self.tangent()
+        return self.scale(t, self.cos(angle)) + self.scale(self.cross(n, t), self.sin(angle))
 
     def ramp(self, values, x):
         """``expr.NumpyBackend.ramp`` as a Color Ramp (linear) with a stop per knot: Cycles tabulates a ramp at 256
@@ -479,8 +496,15 @@ SHARED_SOCKETS = {"float": "NodeSocketFloat", "color": "NodeSocketVector"}  # co
 SHARED_KINDS = {socket: kind for kind, socket in SHARED_SOCKETS.items()}
 
 
-def _shared_group(name: str, body, kinds: list[str]):
-    """The nested group of ``NodeBackend.shared``: inputs of ``kinds``, outputs what ``body`` returns."""
+def shared_group(name: str, body, kinds: list[str]):
+    """The nested group of ``NodeBackend.shared``: inputs of ``kinds``, outputs what ``body`` returns, named ``name``
+    and the generator's version (a file made by an earlier Lamina keeps its groups, which this one does not reuse);
+    made on first use, then found by that name."""
+    name = f"{name} (v{GENERATOR_VERSION})"
+    return bpy.data.node_groups.get(name) or _new_shared_group(name, body, kinds)
+
+
+def _new_shared_group(name: str, body, kinds: list[str]):
     group = bpy.data.node_groups.new(name, "ShaderNodeTree")
     for i, kind in enumerate(kinds):
         group.interface.new_socket(f"Input {i + 1}", in_out="INPUT", socket_type=SHARED_SOCKETS[kind])

@@ -40,8 +40,10 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
   along the normal (computed from the inputs alone: constants Cycles folds) [approx: ms-weights-at-normal], plus
   Lambert lobes, all scaled per view by the baked ``MS Energy`` inputs: the reference's energy scale built on this
   form's own numpy prediction (``energy_values``), linear in √μ between its knots (the reference's ``energy_at``
-  also subtracts the interpolation's error bound where the table is convex); a texture-driven bake keeps the
-  material's own scale for every texel. [approx: ms-energy]
+  also subtracts the interpolation's error bound where the table is convex). Where a layer is oriented off the
+  normal the scale follows the view's azimuth too: the material feeds every knot from a packed float image of it
+  over √μ and the azimuth, looked up at the view (``view_inputs``, ``view_table``, ``view_wiring``); a
+  texture-driven bake keeps the material's own scale for every texel. [approx: ms-energy]
 
 The node-group form also evaluates Schlick's F at h = flake normal [approx: schlick-at-view];
 the OSL form evaluates it per microfacet (generalized_schlick_bsdf).
@@ -105,8 +107,9 @@ APPROXIMATIONS = {
                                     {**_one(type="surface", roughness=0.3, thickness=0.3),
                                      "substrate": {"type": "dielectric", "roughness": 0.3, "ior": 1.5}}),
     "ms-energy": ("multiple scattering's energy scale on the form's own single scattering (not the reference's), "
-                  "on 8 view cosines, linear between them (least over view azimuths; the reference follows the "
-                  "azimuth and bounds the interpolation's error); one per material in texture-driven bakes",
+                  "on 8 view cosines, linear between them (an oriented stack's: a 32 x 64 table over √μ and the "
+                  "azimuth, bilinear; the reference bounds the interpolation's error); one per material in "
+                  "texture-driven bakes",
                   {**_one(type="surface", roughness=0.5, thickness=1.0), "multiple_scattering": True}),
     "ms-weights-at-normal": ("the multiple-scattering closures' weights are the layer math's for the view along "
                              "the normal (constants Cycles folds), their total restored per view by the energy "
@@ -341,6 +344,33 @@ def energy_values(p: model.Params) -> dict:
 
     scale = energy_table(p, _left, _ms_furnace)
     return {MS_PREFIX + prm.label: tuple(float(v) for v in row) for prm, row in zip(MS_ENERGY, scale)}
+
+
+def view_inputs(p: model.Params) -> dict:
+    """Inputs that the material feeds from a table over the view (socket name → ``view_table.ViewTable``): where a
+    layer is oriented off the normal the energy scale depends on the view's azimuth, and the ``MS Energy`` knots (a
+    scale per view cosine, the least over the azimuths) would leave the multiple scattering short by up to 70% at
+    other azimuths (docs/training.md). Every knot is then fed the same lookup of ``energy_grid`` on the
+    ``model.VIEW_ENERGY_GRID``: the knots' interpolation of equal values is that value."""
+    if not (p.multiple_scattering and model.anisotropic(p)):
+        return {}
+    from ..bake import spongecake as bake
+
+    table = _view_energy(p, str(bake.WEIGHTS))
+    return {MS_PREFIX + prm.label: table for prm in MS_ENERGY}
+
+
+@lru_cache(maxsize=64)
+def _view_energy(p: model.Params, weights: str):
+    from ..bake.spongecake import energy_grid
+    from .view_table import ViewTable
+
+    rows, azimuths = model.VIEW_ENERGY_GRID
+    lowest = math.sqrt(model.MIN_ENERGY_COS)
+    mu = np.linspace(lowest, 1.0, rows) ** 2
+    mu[-1] = 1.0
+    phi = np.arange(azimuths) * (2.0 * math.pi / azimuths)
+    return ViewTable(energy_grid(p, _left, _ms_furnace, mu, phi), lowest)
 
 
 def ms_share(p: model.Params) -> float:

@@ -183,21 +183,24 @@ def test_a_node_group_computes_each_pure_operation_once():
 def test_a_shared_computation_is_one_nested_group_that_every_tree_reuses():
     """``NodeBackend.shared`` builds its body once, as a nested group whose outputs are the body's values (a float and
     a colour here), and each tree that calls it gets one Group node of it, linked to the arguments, instead of the
-    body's nodes."""
+    body's nodes. The group's name carries the generator's version, so a file made by a Lamina whose body differed
+    keeps its own group and gets a new one."""
     import bpy
-    from addon.nodes.node_backend import NodeBackend
+    from addon.nodes.node_backend import GENERATOR_VERSION, NodeBackend
 
     def body(b, x, c):
         return [b.sqrt(x) * 2.0, b.scale(c, x)]
 
-    name = "lamina shared test"
+    asked = "lamina shared test"
+    name = f"{asked} (v{GENERATOR_VERSION})"
+    earlier = bpy.data.node_groups.new(f"{asked} (v{GENERATOR_VERSION - 1})", "ShaderNodeTree")
     trees = [bpy.data.node_groups.new(f"lamina caller {i}", "ShaderNodeTree") for i in range(2)]
     try:
         for tree in trees:
             b = NodeBackend(tree, tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput"))
             mu = b.cos_view()
             made = len(tree.nodes)
-            out = b.shared(name, body, mu, (0.2, 0.4, 0.6))
+            out = b.shared(asked, body, mu, (0.2, 0.4, 0.6))
             assert [v.kind for v in out] == ["float", "color"]
             assert len(tree.nodes) == made + 1
             call = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeGroup")
@@ -205,12 +208,12 @@ def test_a_shared_computation_is_one_nested_group_that_every_tree_reuses():
             assert tuple(call.inputs[1].default_value) == pytest.approx((0.2, 0.4, 0.6))
             assert [v.socket for v in out] == list(call.outputs)
         shared = bpy.data.node_groups[name]
-        assert sum(g.name.startswith(name) for g in bpy.data.node_groups) == 1
+        assert sum(g.name.startswith(name) for g in bpy.data.node_groups) == 1 and earlier.users == 0
         kinds = {n.bl_idname for n in shared.nodes}
         assert {"ShaderNodeMath", "ShaderNodeVectorMath"} <= kinds
         assert all(s.is_linked for s in shared.nodes["Group Output"].inputs[:2])
     finally:
-        for tree in trees:
+        for tree in trees + [earlier]:
             bpy.data.node_groups.remove(tree)
         if name in bpy.data.node_groups:
             bpy.data.node_groups.remove(bpy.data.node_groups[name])

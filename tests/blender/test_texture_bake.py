@@ -198,7 +198,8 @@ def test_srgb_textures_are_linearised_like_blender():
 
 def _render_halves(param, form, folder, monkeypatch):
     """Cycles' render of a two-valued texture and the prediction of each half: that texel's baked lobes with the
-    material's own energy scale (not baked per texel: its ``MS Energy`` inputs hold the Lamina node's)."""
+    material's own energy scale (not baked per texel: its ``MS Energy`` inputs hold the Lamina node's, or its view
+    table where the node's own stack is oriented)."""
     path, received = _halves(folder, param)
     mat, _ = _material(param, path, form)
     bake_ops.bake(mat)
@@ -211,6 +212,8 @@ def _render_halves(param, form, folder, monkeypatch):
            tuple(node.inputs[material.socket_key(node, mapping.MS_PREFIX + prm.label)].default_value)[:3]
            for prm in mapping.MS_ENERGY}
     monkeypatch.setattr(mapping, "energy_values", lambda p: own)
+    views = mapping.view_inputs(material.current_params(mat)[1])
+    monkeypatch.setattr(mapping, "view_inputs", lambda p: views)
     mapping._ms_values.cache_clear()
     predicted = {half: predicted_image(model.ID, _params({param: _texel_value(received, *texel[half])}), form, spec)
                  for half in halves}

@@ -74,7 +74,9 @@ def test_white_furnace_configs_are_seeded_and_non_absorbing():
 def test_white_furnace_truth_is_one_and_single_scattering_falls_short():
     sizes = bench.MsSizes(furnace_configs=2, furnace_samples=1024, furnace_paths=4000)
     rows = bench.white_furnace(sizes)
-    assert len(rows) == 8 * len(bench.FURNACE_THETAS)
+    oriented = [model.anisotropic(model.params_from_dict(c)) for c in bench.white_furnace_configs(2, sizes.seed)]
+    assert len(rows) == sum(len(bench.furnace_views(o)) for o in oriented) > 8 * len(bench.FURNACE_THETAS)
+    assert {r["phi"] for r in rows if r["oriented"] and r["theta"] > 0} == set(bench.FURNACE_AZIMUTHS)
     truth = np.array([r["truth"] for r in rows])
     single = np.array([r["ss"] for r in rows])
     assert np.all(truth <= 1.0 + 1e-9) and np.all(truth > 0.95)  # 64 orders: little is cut off
