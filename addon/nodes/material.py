@@ -4,9 +4,10 @@ Node groups and OSL texts are named with a ``Lamina`` prefix and reused per cont
 operator never duplicates them. Parameter values live on the group or script node's inputs; the model dict
 is kept in the material's ``lamina`` property so the other form can be generated from the current values.
 With multiple scattering, the network's prediction is baked into the node's ``MS`` inputs and the material's
-``lamina_ms_key`` property records which parameters (and networks) it was baked for. Switching form, mapping or
-multiple scattering replaces only Lamina's own nodes; the user's nodes and links around them stay, and keys and
-drivers on the Lamina node's inputs move to the new node (``_replace``). The mapping (analytic, fitted, Auto;
+``lamina_ms_key`` property records which parameters (and networks) it was baked for; inputs that the mapping feeds
+from a table over the view (``view_inputs``) get a packed image looked up at the view (``view_wiring``). Switching
+form, mapping or multiple scattering replaces only Lamina's own nodes; the user's nodes and links around them stay,
+and keys and drivers on the Lamina node's inputs move to the new node (``_replace``). The mapping (analytic, fitted, Auto;
 ``choice``) is chosen at each rebuild and recorded in ``lamina_fit`` with the fit it renders; an input fed by an
 Image Texture or by keyframes is tabulated over its range (``plan``), other linked or animated inputs fall back to
 the analytic mapping with a note.
