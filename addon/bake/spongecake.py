@@ -55,8 +55,8 @@ ALPHA_RANGE = (0.01, 1.0)
 G_MAX = 0.95
 THICKNESS_IN = (0.01, 10.0)
 THICKNESS_OUT = (0.01, 20.0)
-MS_VERSION = 4  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
-# stack's scale over the view's azimuth too (``nodes.spongecake.view_inputs``)
+MS_VERSION = 5  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
+# stack's scale over the view's azimuth too (``nodes.spongecake.view_inputs``), 5 the energy budget (``energy_budget``)
 NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 
@@ -262,6 +262,18 @@ def energy_scale(left, lobes, limit=1.0):
     return np.minimum(share, limit)
 
 
+def energy_budget(left, lobes, limit=1.0):
+    """The Cycles forms' energy budget (..., 3): 1 + ``energy_scale`` where single scattering and the Dirac leave at
+    least ``ENERGY_MARGIN``, else (1 − m) / (1 − left) < 1. A form's single scattering can return more than the
+    layers intercept (thin, very rough layers seen near grazing: the mirror approximation's G and the Lambert
+    translucency each take much of it); the forms scale their single scattering and Dirac by min(budget, 1), which
+    brings them down to 1 − m there, and multiple scattering by max(budget − 1, 0). One non-negative value carries
+    both, so it fits the colour inputs and images that carry the scale."""
+    room = np.maximum(1.0 - left, 1e-9)
+    return np.where(left < model.ENERGY_MARGIN, (1.0 - model.ENERGY_MARGIN) / room,
+                    1.0 + energy_scale(left, lobes, limit))
+
+
 WHITENESS_POWER = 16  # the whiteness of a stack: its smallest albedo to this power (``whiteness_of``)
 
 
@@ -275,6 +287,58 @@ def whiteness_of(params: model.Params) -> np.ndarray:
     return np.min(np.asarray(albedos, dtype=np.float64), axis=0) ** WHITENESS_POWER
 
 
+def budget_rows(params: model.Params, left_of, lobes_of, rows: int, phi, substeps: int,
+                phi_substeps: int = 1) -> np.ndarray:
+    """The Cycles forms' energy budget (``energy_budget``; rows, len(phi), 3) on ``models.spongecake.energy_cosines
+    (rows)`` and the azimuths ``phi`` (uniform over the circle from 0 where there are several), interpolated
+    linearly between them and made safe between them (``safe_between``): computed ``substeps`` times finer in √μ and
+    lowered where it caps single scattering; with ``phi_substeps`` > 1, as many times finer in the azimuth and
+    lowered wherever interpolating across an azimuth interval would exceed it."""
+    fine_mu = np.asarray(model.energy_cosines((rows - 1) * substeps + 1))
+    phi = np.asarray(phi, dtype=np.float64)
+    n_phi = len(phi) * phi_substeps
+    fine_phi = np.arange(n_phi) * (2.0 * math.pi / n_phi) if phi_substeps > 1 else phi
+    table = safe_between(energy_grid(params, left_of, lobes_of, fine_mu, fine_phi, scale_of=energy_budget), substeps)
+    if phi_substeps > 1:  # the azimuth wraps around: the first column again at the end
+        wrapped = np.concatenate([table, table[:, :1]], axis=1).swapaxes(0, 1)
+        table = safe_between(wrapped, phi_substeps, everywhere=True).swapaxes(0, 1)[:, :-1]
+    return table
+
+
+# Interpolation may exceed the budget it interpolates by this much before ``safe_between`` lowers it.
+SAFE_TOLERANCE = 1e-3
+
+
+def safe_between(fine, substeps: int, everywhere: bool = False) -> np.ndarray:
+    """Every ``substeps``-th row of ``fine`` (rows along the first axis), lowered so that linear interpolation between
+    the rows does not exceed ``fine`` (at its resolution) by more than ``SAFE_TOLERANCE`` in the intervals where
+    ``fine`` dips below 1 (where the budget caps single scattering): there the higher end is lowered as far as
+    needed, and the lower end too where that is not enough. Near grazing, a thin, very rough layer's budget can leap
+    within one interval from below 1 to several, and interpolating across the leap would let the form's single
+    scattering return more light than it receives. Elsewhere the rows are kept: lowering them wherever the budget is
+    convex costs more energy at the rows than it saves between them (docs/training.md)."""
+    rows = fine[::substeps].copy()
+    t = (np.arange(substeps + 1) / substeps).reshape((-1,) + (1,) * (fine.ndim - 1))
+    for k in range(len(rows) - 1):
+        segment = fine[k * substeps:(k + 1) * substeps + 1]
+        a, b = rows[k], rows[k + 1]
+        unsafe = ((1.0 - t) * a + t * b - segment).max(axis=0) > SAFE_TOLERANCE
+        if not everywhere:
+            unsafe &= segment.min(axis=0) < 1.0
+        if not unsafe.any():
+            continue
+        first_lower = a <= b
+        w = np.where(first_lower, t, 1.0 - t)  # the higher end's weight at each point
+        low, high = np.minimum(a, b), np.maximum(a, b)
+        inner, outer = w < 1.0, w > 0.0
+        low = np.minimum(low, np.where(inner, segment / np.where(inner, 1.0 - w, 1.0), np.inf).min(axis=0))
+        most = np.where(outer, (segment - (1.0 - w) * low) / np.where(outer, w, 1.0), np.inf).min(axis=0)
+        high = np.minimum(high, np.maximum(most, 0.0))
+        rows[k] = np.where(unsafe, np.where(first_lower, low, high), a)
+        rows[k + 1] = np.where(unsafe, np.where(first_lower, high, low), b)
+    return rows
+
+
 def energy_table(params: model.Params, left_of, lobes_of, side: float = 1.0, per_azimuth: bool = False) -> np.ndarray:
     """The energy scale on ``models.spongecake.energy_cosines`` for views above (side 1) or below (-1):
     ``energy_grid`` on those knots. Where a layer is oriented off the normal the scale depends on the view's azimuth:
@@ -285,11 +349,12 @@ def energy_table(params: model.Params, left_of, lobes_of, side: float = 1.0, per
     return table if per_azimuth else table.min(axis=1)
 
 
-def energy_grid(params: model.Params, left_of, lobes_of, mu, phi, side: float = 1.0) -> np.ndarray:
+def energy_grid(params: model.Params, left_of, lobes_of, mu, phi, side: float = 1.0,
+                scale_of=energy_scale) -> np.ndarray:
     """The energy scale (len(mu), len(phi), 3) at the view cosines ``mu`` (increasing; a last 1 is the normal view)
-    and azimuths ``phi``: ``energy_scale`` of ``left_of(params, wo)`` and ``lobes_of(params, wo)`` (the reference's
-    or a Cycles form's, (N, 3) each), limited by ``white_limit`` where the stack conserves energy once white. The
-    len(phi) estimates at the normal view, one view, are averaged."""
+    and azimuths ``phi``: ``scale_of`` (``energy_scale`` or ``energy_budget``) of ``left_of(params, wo)`` and
+    ``lobes_of(params, wo)`` (the reference's or a Cycles form's, (N, 3) each), limited by ``white_limit`` where the
+    stack conserves energy once white. The len(phi) estimates at the normal view, one view, are averaged."""
     wo = spherical(np.repeat(side * mu, len(phi)), np.tile(phi, len(mu)))
 
     def albedos(stack):
@@ -302,7 +367,7 @@ def energy_grid(params: model.Params, left_of, lobes_of, mu, phi, side: float = 
             limit = white_limit(left, lobes, whiteness)
         else:
             limit = white_limit(*albedos(model.white(params)), whiteness)
-    return energy_scale(left, lobes, limit).reshape(len(mu), len(phi), 3)
+    return scale_of(left, lobes, limit).reshape(len(mu), len(phi), 3)
 
 
 def _normal_view_averaged(albedo, mu):

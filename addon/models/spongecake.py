@@ -188,10 +188,11 @@ def default_params() -> Params:
     return params_from_dict({"layers": [{}]})
 
 
-def energy_cosines():
-    """The view cosines of the energy tables' knots (``ENERGY_KNOTS``), as a list."""
+def energy_cosines(count: int = ENERGY_KNOTS):
+    """``count`` view cosines uniform in √μ from √MIN_ENERGY_COS to 1 (by default the energy tables' knots,
+    ``ENERGY_KNOTS``), as a list; the last is exactly 1."""
     lo = MIN_ENERGY_COS ** 0.5
-    return [(lo + (1.0 - lo) * k / (ENERGY_KNOTS - 1)) ** 2 for k in range(ENERGY_KNOTS)]
+    return [(lo + (1.0 - lo) * k / (count - 1)) ** 2 for k in range(count - 1)] + [1.0]
 
 
 def anisotropic(params: Params) -> bool:

@@ -8,7 +8,7 @@ import bpy
 from .expr import (BULK_INPUT, MAX_CONDUCTOR_WEIGHT, MAX_MIX_WEIGHT, METAL_MIN_RATIO, MIN_COS, MIN_LOG, MIN_TANGENT,
                    lobe_fresnel, schlick_at_view)
 
-GENERATOR_VERSION = 5  # bump when generated shaders change, so cached groups are not reused
+GENERATOR_VERSION = 6  # bump when generated shaders change, so cached groups are not reused
 COLUMN = 190
 ROW = 150
 
@@ -138,20 +138,15 @@ class NodeBackend:
         return self._geometry
 
     def cos_view(self):
-        normal, incoming = self.geometry()[:2]
-        d = self._vector("DOT_PRODUCT", NodeValue(self, normal, "color", 1), NodeValue(self, incoming, "color", 1),
-                         out="Value")
-        return self.maximum(d, MIN_COS)
+        return self.maximum(self.dot(self.normal(), self.view()), MIN_COS)
 
     def direction(self, v: NodeValue) -> NodeValue:
         """Tangent-space direction → world: x·T + y·(N×T) + z·N, normalised."""
-        normal, _, tangent = self.geometry()[:3]
-        n = NodeValue(self, normal, "color", 1)
-        t = NodeValue(self, tangent, "color", 1)
+        n, t = self.normal(), self.tangent()
         sep = self._node("ShaderNodeSeparateXYZ", _depth(v))
         self._link_or_set(v, sep.inputs[0])
         comp = [NodeValue(self, sep.outputs[i], "float", _depth(v)) for i in range(3)]
-        bitangent = self._vector("CROSS_PRODUCT", n, t)
+        bitangent = self.cross(n, t)
         world = self.scale(t, comp[0]) + self.scale(bitangent, comp[1]) + self.scale(n, comp[2])
         return self._vector("NORMALIZE", world)
 
@@ -191,11 +186,10 @@ class NodeBackend:
         return self._vector("DOT_PRODUCT", a, b, out="Value")
 
     def dot_view(self, d: NodeValue):
-        return self.dot(d, NodeValue(self, self.geometry()[1], "color", 1))
+        return self.dot(d, self.view())
 
     def tangent_plane(self, d: NodeValue):
-        n = self.normal()
-        t = NodeValue(self, self.geometry()[2], "color", 1)
+        n, t = self.normal(), self.tangent()
         v = d - self.scale(n, self.dot(d, n))
         use_v = self._math("GREATER_THAN", self._vector("LENGTH", v, out="Value"), MIN_TANGENT)
         mix = self._node("ShaderNodeMix", _depth(v, use_v), data_type="VECTOR")
@@ -402,7 +396,7 @@ class NodeBackend:
         ratio = self.maximum(alpha_x / alpha_y, METAL_MIN_RATIO)
         inputs = {"IOR": eta, "Extinction": k, "Roughness": self.sqrt(alpha_y * self.sqrt(ratio)),
                   "Anisotropy": (1.0 - ratio) * (1.0 / (1.0 - METAL_MIN_RATIO)),
-                  "Tangent": self._vector("CROSS_PRODUCT", self.normal(), tangent)}
+                  "Tangent": self.cross(self.normal(), tangent)}
         depth = _depth(weight, *inputs.values()) + 1
         metal = self._node("ShaderNodeBsdfMetallic", depth, distribution="GGX", fresnel_type="PHYSICAL_CONDUCTOR")
         for name, value in inputs.items():

@@ -38,9 +38,11 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
 * delta transmission: transparent × ∏ τ_j(ωo) — exact (ωi = −ωo and σ is symmetric); none over a substrate.
 * multiple scattering (Sec. 5): the network's lobe mapped like the layers, with the closure weights of the view
   along the normal (computed from the inputs alone: constants Cycles folds) [approx: ms-weights-at-normal], plus
-  Lambert lobes, all scaled per view by the baked ``MS Energy`` inputs: the reference's energy scale built on this
-  form's own numpy prediction (``energy_values``), linear in √μ between its knots (the reference's ``energy_at``
-  also subtracts the interpolation's error bound where the table is convex). Where a layer is oriented off the
+  Lambert lobes, all scaled per view by the baked ``MS Energy`` inputs: an energy budget e (``bake.spongecake.
+  energy_budget``), 1 + the reference's energy scale built on this form's own numpy prediction (``energy_values``),
+  linear in √μ between its knots (the reference's ``energy_at`` also subtracts the interpolation's error bound
+  where the table is convex); multiple scattering takes max(e − 1, 0). Where the form's own single scattering and
+  Dirac return more than 1 − m (thin, very rough layers near grazing), e < 1 and they are scaled by min(e, 1). Where a layer is oriented off the
   normal the scale follows the view's azimuth too: the material feeds every knot from a packed float image of it
   over √μ and the azimuth, looked up at the view (``view_inputs``, ``view_table``, ``view_wiring``); a
   texture-driven bake keeps the material's own scale for every texel. [approx: ms-energy]
@@ -106,8 +108,8 @@ APPROXIMATIONS = {
                                     "the reference's half-space (Cycles evaluates the adjoint BSDF)",
                                     {**_one(type="surface", roughness=0.3, thickness=0.3),
                                      "substrate": {"type": "dielectric", "roughness": 0.3, "ior": 1.5}}),
-    "ms-energy": ("multiple scattering's energy scale on the form's own single scattering (not the reference's), "
-                  "on 8 view cosines, linear between them (an oriented stack's: a 32 x 64 table over √μ and the "
+    "ms-energy": ("multiple scattering's energy scale on the form's own single scattering (not the reference's; "
+                  "where that exceeds 1, it is scaled down), on 8 view cosines, linear between them (an oriented stack's: a 32 x 64 table over √μ and the "
                   "azimuth, bilinear; the reference bounds the interpolation's error); one per material in "
                   "texture-driven bakes",
                   {**_one(type="surface", roughness=0.5, thickness=1.0), "multiple_scattering": True}),
@@ -267,12 +269,13 @@ def _ms_sockets(p: model.Params) -> list[Socket]:
     return out + [Socket(MS_PREFIX + prm.label, prm.kind, prm, None, MS_PANEL, True) for prm in MS_ENERGY]
 
 
-# The energy scale of the multiple-scattering closures at each knot of ``model.energy_cosines`` (``_energy``): per
+# The energy budget (``bake.spongecake.energy_budget``) at each knot of ``model.energy_cosines`` (``_energy``): per
 # material, not per texel (a texture-driven bake keeps the material's own).
 MS_ENERGY = tuple(
-    Param(f"energy_{k + 1}", f"Energy {k + 1}", "color", (1.0, 1.0, 1.0), 0.0, None,
-          description=f"Baked energy scale of the multiple-scattering closures seen at {math.degrees(math.acos(c)):.0f}° "
-                      "(keeps them within what single scattering leaves)")
+    Param(f"energy_{k + 1}", f"Energy {k + 1}", "color", (2.0, 2.0, 2.0), 0.0, None,
+          description=f"Baked energy budget seen at {math.degrees(math.acos(c)):.0f}°: the multiple-scattering "
+                      "closures take what exceeds 1 (keeping them within what single scattering leaves); below 1 it "
+                      "scales single scattering down")
     for k, c in enumerate(model.energy_cosines()))
 
 
@@ -333,16 +336,21 @@ def _lobe_values(p: model.Params) -> dict:
 # The albedos behind ``energy_values``: GGX reflection by its own quadrature (flakes may be near-mirrors), the other
 # closures on a direction grid a quarter of the default.
 ENERGY_QUADRATURE = (32, 64)
+# The budget behind the knots and the view tables' rows is computed this many times finer in √μ
+# (``bake.spongecake.budget_rows``), so that it is safe between them too.
+BUDGET_SUBSTEPS = 4
+VIEW_BUDGET_SUBSTEPS = (2, 2)
 
 
 def energy_values(p: model.Params) -> dict:
-    """The ``MS Energy`` inputs: the reference's energy scale (``reference.spongecake.energy_tables``) computed on
-    what Cycles renders (its numpy prediction, OSL form): what the form's single scattering and Dirac leave, over
-    the albedo of its multiple-scattering closures, so that the rendered furnace stays at most 1 (and is 1 less
-    ``ENERGY_MARGIN`` for a white isotropic stack at the knots) whatever the single-scattering mapping's error."""
-    from ..bake.spongecake import energy_table
+    """The ``MS Energy`` inputs: the energy budget (``bake.spongecake.energy_budget``: 1 + the reference's energy
+    scale, ``reference.spongecake.energy_tables``) computed on what Cycles renders (its numpy prediction, OSL form):
+    what the form's single scattering and Dirac leave, over the albedo of its multiple-scattering closures, so that
+    the rendered furnace stays at most 1 (and is 1 less ``ENERGY_MARGIN`` for a white isotropic stack at the knots)
+    whatever the single-scattering mapping's error, even where that single scattering alone exceeds 1."""
+    from ..bake.spongecake import budget_rows, energy_azimuths
 
-    scale = energy_table(p, _left, _ms_furnace)
+    scale = budget_rows(p, _left, _ms_furnace, model.ENERGY_KNOTS, energy_azimuths(p), BUDGET_SUBSTEPS).min(axis=1)
     return {MS_PREFIX + prm.label: tuple(float(v) for v in row) for prm, row in zip(MS_ENERGY, scale)}
 
 
@@ -350,7 +358,7 @@ def view_inputs(p: model.Params) -> dict:
     """Inputs that the material feeds from a table over the view (socket name → ``view_table.ViewTable``): where a
     layer is oriented off the normal the energy scale depends on the view's azimuth, and the ``MS Energy`` knots (a
     scale per view cosine, the least over the azimuths) would leave the multiple scattering short by up to 70% at
-    other azimuths (docs/training.md). Every knot is then fed the same lookup of ``energy_grid`` on the
+    other azimuths (docs/training.md). Every knot is then fed the same lookup of ``bake.spongecake.budget_rows`` on the
     ``model.VIEW_ENERGY_GRID``: the knots' interpolation of equal values is that value."""
     if not (p.multiple_scattering and model.anisotropic(p)):
         return {}
@@ -362,15 +370,13 @@ def view_inputs(p: model.Params) -> dict:
 
 @lru_cache(maxsize=64)
 def _view_energy(p: model.Params, weights: str):
-    from ..bake.spongecake import energy_grid
+    from ..bake.spongecake import budget_rows
     from .view_table import ViewTable
 
     rows, azimuths = model.VIEW_ENERGY_GRID
-    lowest = math.sqrt(model.MIN_ENERGY_COS)
-    mu = np.linspace(lowest, 1.0, rows) ** 2
-    mu[-1] = 1.0
     phi = np.arange(azimuths) * (2.0 * math.pi / azimuths)
-    return ViewTable(energy_grid(p, _left, _ms_furnace, mu, phi), lowest)
+    table = budget_rows(p, _left, _ms_furnace, rows, phi, *VIEW_BUDGET_SUBSTEPS)
+    return ViewTable(table, math.sqrt(model.MIN_ENERGY_COS))
 
 
 def ms_share(p: model.Params) -> float:
@@ -380,7 +386,8 @@ def ms_share(p: model.Params) -> float:
     single = replace(p, multiple_scattering=False)
     ss = closure_furnace(lambda w: _numpy_shaded(single, input_values(single), w, shade), normal, ENERGY_QUADRATURE,
                          SHARP_ALBEDO)
-    ms = _ms_furnace(p, normal) * np.asarray(ms_values(p)[MS_PREFIX + MS_ENERGY[-1].label])  # last knot: μ = 1
+    budget = np.asarray(ms_values(p)[MS_PREFIX + MS_ENERGY[-1].label])  # last knot: μ = 1
+    ms = _ms_furnace(p, normal) * np.maximum(budget - 1.0, 0.0)
     total = float(np.mean(ss + ms))
     return float(np.mean(ms)) / total if total > 0.0 else 0.0
 
@@ -409,6 +416,10 @@ def _numpy_shaded(p: model.Params, values: dict, wo, shade_with):
 def shade(b, p: model.Params) -> None:
     """Build the closure mix for the stack structure of ``p`` on backend ``b`` (see module docstring)."""
     mu = b.cos_view()
+    if p.multiple_scattering:  # the energy budget (``_energy``) scales single scattering below 1, MS above
+        budget = _energy(b, mu)
+        multiple = _EnergyScaled(b, b.maximum(budget - 1.0, (0.0, 0.0, 0.0)))
+        b = _EnergyScaled(b, b.minimum(budget, (1.0, 1.0, 1.0)))
     terms = _layers(b, p, mu, "")
     stack = _prod(*[t["tau"] for t in terms])
     if p.substrate is not None:
@@ -417,7 +428,7 @@ def shade(b, p: model.Params) -> None:
     if p.delta_transmission and p.substrate is None:  # every substrate blocks or refracts it (reference)
         b.transparent(b.scale((1.0, 1.0, 1.0), stack))
     if p.multiple_scattering:
-        _multiple_scattering(_EnergyScaled(b, _energy(b, mu)), p)
+        _multiple_scattering(multiple, p)
 
 
 def _layers(b, p: model.Params, mu, prefix: str, along_normal: bool = False) -> list[dict]:
@@ -447,7 +458,7 @@ def _multiple_scattering(b, p: model.Params) -> None:
     """Sec. 5: the network's extra single-scattering lobe (its parameters baked into the ``MS`` inputs, W1 in
     the albedo), mapped like the layers themselves but with the closure weights of the view along the normal,
     plus the Lambert lobes W2r / π and W2t / π (exact). ``shade`` passes a backend that scales these closures by
-    the per-view energy scale (``_EnergyScaled``), which restores the lobe's energy at each view: the weights'
+    the per-view energy scale (``_EnergyScaled``, the budget less 1), which restores the lobe's energy at each view: the weights'
     split between the closures is that of normal incidence. Computed from the inputs alone, these weights are
     constants that Cycles folds when the inputs are baked values. [approx: ms-weights-at-normal]"""
     _layers(b, p, 1.0, MS_PREFIX, along_normal=True)
@@ -474,7 +485,7 @@ def _energy(b, mu):
 class _EnergyScaled:
     """A backend that passes everything to ``b`` but multiplies the colour of each closure by ``scale``."""
 
-    CLOSURES = ("glossy", "diffuse", "translucent")
+    CLOSURES = ("glossy", "diffuse", "translucent", "transparent", "conductor", "dielectric")
 
     def __init__(self, b, scale):
         self._b, self._scale = b, scale

@@ -71,6 +71,16 @@ def test_white_furnace_configs_are_seeded_and_non_absorbing():
 
 
 @pytest.mark.usefixtures("coarse_energy_tables")
+def test_the_dense_furnace_sees_oriented_stacks_at_every_azimuth():
+    sizes = bench.MsSizes(furnace_configs=1)
+    oriented = [model.anisotropic(model.params_from_dict(c)) for c in bench.white_furnace_configs(1, sizes.seed)]
+    a = bench.dense_cycles_furnace(sizes)
+    views = sum(bench.DENSE_AZIMUTHS if o else 1 for o in oriented) * len(bench.DENSE_THETAS)
+    assert any(oriented) and a.shape == (views,)
+    assert np.all(np.isfinite(a)) and a.min() > 0.5 and a.max() < 1.5  # coarse tables: a measuring-code test
+
+
+@pytest.mark.usefixtures("coarse_energy_tables")
 def test_white_furnace_truth_is_one_and_single_scattering_falls_short():
     sizes = bench.MsSizes(furnace_configs=2, furnace_samples=1024, furnace_paths=4000)
     rows = bench.white_furnace(sizes)

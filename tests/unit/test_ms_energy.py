@@ -125,7 +125,7 @@ def test_energy_inputs_are_the_forms_scale():
     values = mapping.ms_values(p)
     energy = [values[mapping.MS_PREFIX + prm.label] for prm in mapping.MS_ENERGY]
     assert len(energy) == model.ENERGY_KNOTS
-    assert np.all(np.isfinite(energy)) and np.min(energy) >= 0.0
+    assert np.all(np.isfinite(energy)) and np.min(energy) >= 1.0  # a budget: 1 + the scale (here nothing is capped)
     assert np.ptp(energy) > 0.01  # a view-dependent scale, not a constant
 
 
@@ -138,6 +138,55 @@ def test_energy_scale_limits():
     np.testing.assert_allclose(bake.white_limit(np.array([0.6]), np.array([0.3]), np.array([0.0])), [1.0])
     dark = model.params_from_dict({"layers": [{"type": "hg", "albedo": [1.0, 0.8, 0.0]}]})
     np.testing.assert_allclose(bake.whiteness_of(dark), [1.0, 0.8 ** bake.WHITENESS_POWER, 0.0])
+
+
+def test_energy_budget_caps_single_scattering_only_where_it_leaves_nothing():
+    """The forms' budget is 1 + the scale where single scattering and the Dirac leave at least the margin, and below
+    1 where they leave less: then it scales them to 1 − margin; the two pieces meet at the margin."""
+    m = model.ENERGY_MARGIN
+    left, lobes = np.array([[0.3, m, -0.02]]), np.array([[0.2, 0.2, 0.2]])
+    budget = bake.energy_budget(left, lobes)
+    np.testing.assert_allclose(budget[0, :2], 1.0 + bake.energy_scale(left, lobes)[0, :2])
+    np.testing.assert_allclose(budget[0, 1], 1.0)
+    np.testing.assert_allclose(budget[0, 2] * (1.0 - left[0, 2]), 1.0 - m)  # SS + Dirac scaled to 1 − margin
+    just_below = bake.energy_budget(np.array([[m - 1e-9]]), lobes[:, :1])
+    assert 1.0 - 1e-6 < just_below[0, 0] < 1.0
+
+
+def test_safe_between_lowers_rows_only_where_a_dip_below_one_would_be_interpolated_over():
+    """A leap from several down to below 1 within one interval: linear interpolation between the rows would exceed
+    the budget between them (let single scattering gain energy); the safe rows do not, and keep the lower end. A
+    convex budget above 1 keeps its rows (its small overshoot is multiple scattering's, bounded elsewhere)."""
+    u = np.linspace(0.0, 1.0, 9)[:, None]
+    leap = np.where(u < 0.2, 5.0 - 20.0 * u, 0.97 + 0.0 * u)  # 5 at the first row, 0.97 from u = 0.2 on
+    rows = bake.safe_between(leap, 4)
+    interpolated = np.interp(u[:, 0], [0.0, 0.5, 1.0], rows[:, 0])
+    assert (((1.0 - u[:5, 0] / 0.5) * leap[0, 0] + u[:5, 0] / 0.5 * leap[4, 0]) > leap[:5, 0] + 0.5).any()
+    assert np.all(interpolated <= leap[:, 0] + bake.SAFE_TOLERANCE)
+    assert rows[1, 0] == pytest.approx(0.97) and rows[2, 0] == pytest.approx(0.97)
+    convex = 1.5 + (u - 0.5) ** 2
+    np.testing.assert_array_equal(bake.safe_between(convex, 4), convex[::4])
+
+
+# A thin, very rough layer seen near grazing: the forms' single scattering and Dirac alone return more than 1
+# (mirror-G and the Lambert translucency each take much of what the layer intercepts).
+THIN_ROUGH = {
+    "isotropic flakes": {"type": "surface", "roughness": 0.99, "thickness": 0.059},
+    "in-plane fibers": {"type": "fiber", "roughness": 0.97, "thickness": 0.062, "orientation": [-0.76, -0.65, 0.0]},
+}
+
+
+@pytest.mark.parametrize("form", ["osl", "nodes"])
+@pytest.mark.parametrize("name", list(THIN_ROUGH))
+def test_the_budget_caps_single_scattering_that_returns_more_than_it_receives(form, name):
+    p = _params({"layers": [{"albedo": [1, 1, 1], **THIN_ROUGH[name]}]})
+    theta = np.radians(np.repeat([70.0, 80.0, 85.0, 86.0, 87.0, 88.0], 12))
+    wo = spherical(np.cos(theta), np.tile(np.radians(np.arange(0.0, 360.0, 30.0)), 6))
+    single = _form_furnace(replace(p, multiple_scattering=False), form, wo)
+    assert single.max() > 1.015  # without the budget the form glows here
+    a = _form_furnace(p, form, wo)
+    assert np.all(np.isfinite(a)) and a.max() <= 1.002, a.max(axis=1)
+    assert np.mean(np.abs(a - 1.0)) <= 0.015, a[:, 0]
 
 
 def _table(values_of):
