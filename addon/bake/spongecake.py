@@ -312,8 +312,8 @@ SAFE_TOLERANCE = 1e-3
 def safe_between(fine, substeps: int, everywhere: bool = False) -> np.ndarray:
     """Every ``substeps``-th row of ``fine`` (rows along the first axis), lowered so that linear interpolation between
     the rows does not exceed ``fine`` (at its resolution) by more than ``SAFE_TOLERANCE`` in the intervals where
-    ``fine`` dips below 1 (where the budget caps single scattering): there the higher end is lowered as far as
-    needed, and the lower end too where that is not enough. Near grazing, a thin, very rough layer's budget can leap
+    ``fine`` dips below 1 (where the budget caps single scattering), or in every interval with ``everywhere``: there
+    the higher end is lowered as far as needed, and the lower end too where that is not enough. Near grazing, a thin, very rough layer's budget can leap
     within one interval from below 1 to several, and interpolating across the leap would let the form's single
     scattering return more light than it receives. Elsewhere the rows are kept: lowering them wherever the budget is
     convex costs more energy at the rows than it saves between them (docs/training.md)."""

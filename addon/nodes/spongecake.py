@@ -42,8 +42,8 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
   energy_budget``), 1 + the reference's energy scale built on this form's own numpy prediction (``energy_values``),
   linear in √μ between its knots (the reference's ``energy_at`` also subtracts the interpolation's error bound
   where the table is convex); multiple scattering takes max(e − 1, 0). Where the form's own single scattering and
-  Dirac return more than 1 − m (thin, very rough layers near grazing), e < 1 and they are scaled by min(e, 1). Where a layer is oriented off the
-  normal the scale follows the view's azimuth too: the material feeds every knot from a packed float image of it
+  Dirac return more than 1 − m (thin, very rough layers near grazing), e < 1 and they are scaled by min(e, 1).
+  Where a layer is oriented off the normal the scale follows the view's azimuth too: the material feeds every knot from a packed float image of it
   over √μ and the azimuth, looked up at the view (``view_inputs``, ``view_table``, ``view_wiring``); a
   texture-driven bake keeps the material's own scale for every texel. [approx: ms-energy]
 
@@ -109,8 +109,8 @@ APPROXIMATIONS = {
                                     {**_one(type="surface", roughness=0.3, thickness=0.3),
                                      "substrate": {"type": "dielectric", "roughness": 0.3, "ior": 1.5}}),
     "ms-energy": ("multiple scattering's energy scale on the form's own single scattering (not the reference's; "
-                  "where that exceeds 1, it is scaled down), on 8 view cosines, linear between them (an oriented stack's: a 32 x 64 table over √μ and the "
-                  "azimuth, bilinear; the reference bounds the interpolation's error); one per material in "
+                  "where that exceeds 1, it is scaled down), on 8 view cosines, linear between them (an oriented "
+                  "stack's: a 32 x 64 table over √μ and the azimuth, bilinear; the reference bounds the interpolation's error); one per material in "
                   "texture-driven bakes",
                   {**_one(type="surface", roughness=0.5, thickness=1.0), "multiple_scattering": True}),
     "ms-weights-at-normal": ("the multiple-scattering closures' weights are the layer math's for the view along "
