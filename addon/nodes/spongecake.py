@@ -356,8 +356,8 @@ def energy_values(p: model.Params) -> dict:
 
 def view_inputs(p: model.Params) -> dict:
     """Inputs that the material feeds from a table over the view (socket name → ``view_table.ViewTable``): where a
-    layer is oriented off the normal the energy scale depends on the view's azimuth, and the ``MS Energy`` knots (a
-    scale per view cosine, the least over the azimuths) would leave the multiple scattering short by up to 70% at
+    layer is oriented off the normal the energy budget depends on the view's azimuth, and the ``MS Energy`` knots (a
+    budget per view cosine, the least over the azimuths) would leave the multiple scattering short by up to 70% at
     other azimuths (docs/training.md). Every knot is then fed the same lookup of ``bake.spongecake.budget_rows`` on the
     ``model.VIEW_ENERGY_GRID``: the knots' interpolation of equal values is that value."""
     if not (p.multiple_scattering and model.anisotropic(p)):
