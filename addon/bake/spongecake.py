@@ -296,8 +296,7 @@ def budget_rows(params: model.Params, left_of, lobes_of, rows: int, phi, substep
     lowered wherever interpolating across an azimuth interval would exceed it."""
     fine_mu = np.asarray(model.energy_cosines((rows - 1) * substeps + 1))
     phi = np.asarray(phi, dtype=np.float64)
-    n_phi = len(phi) * phi_substeps
-    fine_phi = np.arange(n_phi) * (2.0 * math.pi / n_phi) if phi_substeps > 1 else phi
+    fine_phi = np.asarray(model.uniform_azimuths(len(phi) * phi_substeps)) if phi_substeps > 1 else phi
     table = safe_between(energy_grid(params, left_of, lobes_of, fine_mu, fine_phi, scale_of=energy_budget), substeps)
     if phi_substeps > 1:  # the azimuth wraps around: the first column again at the end
         wrapped = np.concatenate([table, table[:, :1]], axis=1).swapaxes(0, 1)
@@ -386,8 +385,7 @@ NEGLIGIBLE_WHITENESS = 1e-6
 def energy_azimuths(params: model.Params) -> np.ndarray:
     """The view azimuths of the energy tables: ``ENERGY_AZIMUTHS`` uniform ones from 0 where a layer is oriented off
     the normal, the one azimuth 0 otherwise."""
-    n_phi = model.ENERGY_AZIMUTHS if model.anisotropic(params) else 1
-    return np.arange(n_phi) * (2.0 * math.pi / n_phi)
+    return np.asarray(model.uniform_azimuths(model.ENERGY_AZIMUTHS if model.anisotropic(params) else 1))
 
 
 def white_limit(left_white, lobes_white, whiteness):

@@ -7,6 +7,7 @@ and orientation ω_p (flake normal for ``surface``, fiber tangent for ``fiber``;
 """
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, replace
 
 from .params import METADATA_KEYS, Param, ParamError, Validated, read_fields
@@ -193,6 +194,11 @@ def energy_cosines(count: int = ENERGY_KNOTS):
     ``ENERGY_KNOTS``), as a list; the last is exactly 1."""
     lo = MIN_ENERGY_COS ** 0.5
     return [(lo + (1.0 - lo) * k / (count - 1)) ** 2 for k in range(count - 1)] + [1.0]
+
+
+def uniform_azimuths(count: int):
+    """``count`` view azimuths uniform over the circle from 0 (the energy tables' columns), as a list."""
+    return [2.0 * math.pi * k / count for k in range(count)]
 
 
 def anisotropic(params: Params) -> bool:

@@ -374,8 +374,7 @@ def _view_energy(p: model.Params, weights: str):
     from .view_table import ViewTable
 
     rows, azimuths = model.VIEW_ENERGY_GRID
-    phi = np.arange(azimuths) * (2.0 * math.pi / azimuths)
-    table = budget_rows(p, _left, _ms_furnace, rows, phi, *VIEW_BUDGET_SUBSTEPS)
+    table = budget_rows(p, _left, _ms_furnace, rows, model.uniform_azimuths(azimuths), *VIEW_BUDGET_SUBSTEPS)
     return ViewTable(table, math.sqrt(model.MIN_ENERGY_COS))
 
 
