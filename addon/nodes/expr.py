@@ -215,22 +215,37 @@ class NumpyBackend(NumpyMath):
     def own_albedo(self, quadratures=closures_np.ALBEDO) -> tuple[np.ndarray, bool]:
         """The directional albedo (N, 3) of the closures that have a quadrature of their own in ``quadratures``
         (``closures_np.ALBEDO``: Lambert exactly, Beckmann lobes of any sharpness in slope space), and whether other
-        closures remain (for ``evaluate(wi, own=False)`` on a direction grid)."""
+        closures remain (for ``evaluate_rows`` on a direction grid)."""
         out = np.zeros((self.n, 3))
         for kind, color, kw in self.closures:
             if kind in quadratures:
                 out += np.broadcast_to(color, (self.n, 3)) * quadratures[kind](self.wo, **kw)
         return out, any(kind not in quadratures for kind, _, _ in self.closures)
 
-    def evaluate(self, wi: np.ndarray, own: bool = True, quadratures=closures_np.ALBEDO) -> np.ndarray:
-        """The BSDF value (no cosine) that the recorded closures give for light from ``wi`` (with ``own`` False, only
-        the closures without an albedo quadrature of their own in ``quadratures``, see ``own_albedo``)."""
+    def evaluate(self, wi: np.ndarray) -> np.ndarray:
+        """The BSDF value (no cosine) that the recorded closures give for light from ``wi``."""
         wi = np.asarray(wi, dtype=np.float64)
         f = np.zeros((self.n, 3))
         for kind, color, kw in self.closures:
-            if own or kind not in quadratures:
-                f += color * closures_np.EVAL[kind](wi, self.wo, **kw)
+            f += color * closures_np.EVAL[kind](wi, self.wo, **kw)
         return f
+
+    def evaluate_rows(self, wi: np.ndarray, rows: np.ndarray, quadratures=closures_np.ALBEDO) -> np.ndarray:
+        """``evaluate(wi)`` of the closures without an albedo quadrature of their own in ``quadratures`` (see
+        ``own_albedo``) for the views ``wo[rows]`` (one row index per wi), reusing the closures
+        recorded at ``wo`` instead of shading the views again (``closure_furnace``). Needs every per-view value
+        recorded with N rows, which ``closure_furnace`` ensures by never shading exactly 3 views (a constant
+        direction or colour has 3 entries too)."""
+        f = np.zeros((len(wi), 3))
+        for kind, color, kw in self.closures:
+            if kind not in quadratures:
+                taken = {k: self._per_row(v, rows) for k, v in kw.items()}
+                f += self._per_row(color, rows) * closures_np.EVAL[kind](wi, self.wo[rows], **taken)
+        return f
+
+    def _per_row(self, v, rows):
+        a = np.asarray(v) if v is not None else None
+        return a[rows] if a is not None and a.ndim and a.shape[0] == self.n else v
 
 
 def closure_furnace(backend_at, wo: np.ndarray, quadrature=(64, 128), quadratures=closures_np.ALBEDO) -> np.ndarray:
@@ -241,12 +256,15 @@ def closure_furnace(backend_at, wo: np.ndarray, quadrature=(64, 128), quadrature
     (``quadrature`` nodes)."""
     from ..reference.scenes import directional_albedo
 
-    b = backend_at(wo)
+    wo = np.asarray(wo, dtype=np.float64).reshape(-1, 3)
+    n = len(wo)
+    padded = np.concatenate([wo, wo[:1]]) if n == 3 else wo  # see ``NumpyBackend.evaluate_rows``
+    b = backend_at(padded)
     own, rest = b.own_albedo(quadratures)
     if rest:
-        own = own + directional_albedo(lambda wi, w: backend_at(w).evaluate(wi, own=False, quadratures=quadratures),
-                                       wo, quadrature)
-    return own + b.transparency()
+        own = own + directional_albedo(lambda wi, rows: b.evaluate_rows(wi, rows, quadratures), padded, quadrature,
+                                       by_row=True)
+    return (own + b.transparency())[:n]
 
 
 # ----------------------------------------------------------------------------------------------- OSL

@@ -334,8 +334,11 @@ def _albedo_nodes(n_mu: int, n_phi: int):
     return mu, wmu, psi, wpsi
 
 
-def directional_albedo(bsdf_eval: BsdfEval, wo: np.ndarray, quadrature=(64, 128), chunk=1 << 20) -> np.ndarray:
+def directional_albedo(bsdf_eval: BsdfEval, wo: np.ndarray, quadrature=(64, 128), chunk=1 << 20,
+                       by_row: bool = False) -> np.ndarray:
     """a(wo) = integral over the sphere of f(wi, wo) |cos theta_i| d wi, for local wo (N, 3) -> (N, 3).
+    With ``by_row``, ``bsdf_eval(wi, rows)`` gets the index into ``wo`` of each wi's view instead of the view (a
+    BSDF whose parameters were computed once per view).
 
     Deterministic product quadrature (``quadrature`` = (Gauss-Legendre nodes per hemisphere in
     cos theta, nodes in phi), the phi nodes packed around wo's plane of incidence, see ``_albedo_nodes``).
@@ -361,8 +364,11 @@ def directional_albedo(bsdf_eval: BsdfEval, wo: np.ndarray, quadrature=(64, 128)
             sin_t[None, :, None] * sp[:, None, :],
             np.broadcast_to(mu[None, :, None], (m, mu.size, psi.size)),
         ], axis=-1).reshape(-1, 3)
-        wo_all = np.broadcast_to(wo_c[:, None, :], (m, nq, 3)).reshape(-1, 3)
-        f = _eval_rgb(bsdf_eval, wi_all, np.ascontiguousarray(wo_all)).reshape(m, nq, 3)
+        if by_row:
+            views = np.repeat(np.arange(s0, s0 + m), nq)
+        else:
+            views = np.ascontiguousarray(np.broadcast_to(wo_c[:, None, :], (m, nq, 3)).reshape(-1, 3))
+        f = _eval_rgb(bsdf_eval, wi_all, views).reshape(m, nq, 3)
         out[s0:s0 + m] = np.einsum("mqc,q->mc", f, wts.reshape(-1))
     return out
 

@@ -48,6 +48,7 @@ def _by_structure(named: dict) -> list[tuple[str, ...]]:
 PRESETS = {name: model.params_from_dict(presets.load(model.ID, name)) for name in presets.names(model.ID)}
 
 
+@pytest.mark.under_4_2_for("brushed_steel_scratched_coat", "forward_scattering")
 @pytest.mark.parametrize("names", _by_structure(PRESETS), ids=lambda names: "+".join(names))
 @pytest.mark.parametrize("form", ["nodes", "osl"])
 def test_cycles_renders_the_predicted_mapping(names, form, tmp_path):

@@ -36,6 +36,7 @@ def _render(p, form, spec, samples, tmp_path):
     return img
 
 
+@pytest.mark.under_4_2_for("copper_flakes", "leaf", "fabric")
 @pytest.mark.parametrize("name", presets.names(model.ID))
 @pytest.mark.parametrize("form", ["nodes", "osl"])
 def test_cycles_renders_the_predicted_mapping(name, form, tmp_path):

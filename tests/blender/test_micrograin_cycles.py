@@ -30,6 +30,7 @@ DENSE_METAL = {"filling_factor": 0.98, "anfractuosity": 1.0, "bulk": {"type": "d
                "grain": {"type": "conductor", "ior": [0.2, 0.9, 1.1], "k": [3.9, 2.4, 2.1]}}
 
 
+@pytest.mark.under_4_2_for("rust_on_metal", "dirt_on_glass")
 @pytest.mark.parametrize("name", presets.names(model.ID) + ["dense_metal"])
 @pytest.mark.parametrize("form", ["nodes", "osl"])
 def test_cycles_renders_the_predicted_mapping(name, form, tmp_path):

@@ -43,6 +43,7 @@ def clean_file(monkeypatch):
     yield
 
 
+@pytest.mark.under_4_2_for("varnished_metal", "rough_over_smooth", "slab")
 @pytest.mark.parametrize("name", presets.names(model.ID) + sorted(SLABS))
 @pytest.mark.parametrize("form", ["nodes", "osl"])
 def test_cycles_renders_the_predicted_mapping(name, form, tmp_path):
@@ -126,6 +127,7 @@ EXTREMES = {
 }
 
 
+@pytest.mark.under_4_2_for("nodes", "mirror_metal")
 @pytest.mark.parametrize("form", ["nodes", "osl"])
 @pytest.mark.parametrize("case", sorted(EXTREMES))
 def test_extremes_render_finite_non_negative_pixels(case, form, tmp_path):

@@ -260,3 +260,24 @@ def test_with_view_independent_weights_a_white_stack_still_returns_what_it_recei
                                                                   mapping.shade),
                                    views, mapping.ENERGY_QUADRATURE, closures_np.SHARP_ALBEDO)
     np.testing.assert_allclose(furnace, 1.0 - model.ENERGY_MARGIN, atol=2e-3)
+
+
+@pytest.mark.parametrize("views", [3, 7])
+def test_the_furnace_reuses_each_views_closures_exactly(views):
+    """``closure_furnace`` integrates the closures recorded once per view (``evaluate_rows``): the same numbers as
+    shading every direction of the grid again, also for 3 views (a constant direction has 3 entries too); a fiber
+    layer and a tilted flake layer give closures with per-view normals and tangents."""
+    from addon.reference.scenes import directional_albedo
+
+    p = model.params_from_dict({"layers": [
+        {"type": "fiber", "roughness": 0.3, "albedo": [0.9, 0.5, 0.2], "thickness": 0.7, "orientation": [1, 0, 0]},
+        {"type": "surface", "roughness": 0.4, "albedo": [0.6, 0.6, 0.9], "thickness": 2.0,
+         "orientation": [0.3, 0.2, 0.9]}]})
+    wo = _dirs(views, 5)
+
+    def backend_at(w):
+        return _predict(p, w, w)[1]
+
+    regridded = directional_albedo(lambda wi, w: backend_at(w).evaluate(wi), wo, (16, 32))
+    reused = expr.closure_furnace(backend_at, wo, (16, 32), quadratures={})
+    np.testing.assert_allclose(reused, regridded, rtol=1e-12, atol=1e-15)
