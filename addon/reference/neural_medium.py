@@ -172,16 +172,32 @@ def _bin_directions(n_theta: int, n_phi: int, sub: int) -> np.ndarray:
 
 def _double_ring(r0: float, r1: float, z0, z1, sub: int, quadrature) -> np.ndarray:
     """``double_table``'s cell averages (n_z, n_dir) over one ring rho in [r0, r1] and the z cells [z0, z1], without
-    albedo^2."""
+    albedo^2. Along psi the integrand factors: exp(-s - r) = exp(-z - rho tan(psi / 2)) (s = z - rho cot psi,
+    r = rho csc psi), so the steps wholly beyond psi0 are one suffix sum per rho (``_suffix_sums``) and only the
+    step that psi0 cuts is summed per point."""
     edges, psi, first, second = quadrature
     frac = (np.arange(sub) + 0.5) / sub
-    R = (r0 + frac * (r1 - r0))[:, None, None, None]  # (sub, 1, 1, 1) against z (n_z, sub) and psi (nodes)
-    Z = (z0[:, None] + frac[None, :] * (z1 - z0)[:, None])[None, :, :, None]
-    psi0 = np.arctan2(R, Z)
-    width = np.clip(np.minimum(edges[1:], math.pi) - np.maximum(edges[:-1], psi0), 0.0, None)
-    s = Z - R / np.tan(psi)
-    w = np.where(s >= 0.0, np.exp(-np.maximum(s, 0.0) - R / np.sin(psi)), 0.0) * first * width
-    return np.einsum("azbn,nd->zd", w, second) * 2.0 / ((r0 + r1) * sub * sub)
+    rho = r0 + frac * (r1 - r0)  # (sub,) against the points z (n_z, sub)
+    z = z0[:, None] + frac[None, :] * (z1 - z0)[:, None]
+    half_mid, half_edge = np.tan(0.5 * psi), np.tan(0.5 * edges)
+    suffix = _suffix_sums(rho, half_mid, half_edge, (first * np.diff(edges))[:, None] * second)
+    R, Z = rho[:, None, None], z[None]
+    psi0 = np.arctan2(R, Z)  # (sub, n_z, sub): the first step psi0 cuts, then the steps beyond it
+    k = np.clip(np.searchsorted(edges, psi0, side="right") - 1, 0, len(psi) - 1)
+    beyond = np.exp(-Z - R * half_edge[k + 1])[..., None] * suffix[np.arange(len(rho))[:, None, None], k + 1]
+    cut = psi[k] >= psi0  # the step's midpoint lies beyond psi0 (s >= 0 there)
+    part = np.where(cut, np.exp(np.where(cut, -Z - R * half_mid[k], 0.0)) * first[k] * (edges[k + 1] - psi0), 0.0)
+    return np.einsum("azbd->zd", beyond + part[..., None] * second[k]) * 2.0 / ((r0 + r1) * sub * sub)
+
+
+def _suffix_sums(rho, half_mid, half_edge, g) -> np.ndarray:
+    """(n_rho, nodes + 1, n_dir): S_m = sum over the steps n >= m of exp(-rho (tan(psi_n / 2) - tan(e_m / 2))) g_n,
+    by the backward recursion S_m = exp(-rho (t_m - T_m)) g_m + exp(-rho (T_m+1 - T_m)) S_m+1 (every exponent <= 0)."""
+    out = np.zeros((len(rho), len(half_mid) + 1, g.shape[1]))
+    for m in range(len(half_mid) - 1, -1, -1):
+        out[:, m] = (np.exp(-rho * (half_mid[m] - half_edge[m]))[:, None] * g[m]
+                     + np.exp(-rho * (half_edge[m + 1] - half_edge[m]))[:, None] * out[:, m + 1])
+    return out
 
 
 # ------------------------------------------------------------------------------------------ tables and the gather
