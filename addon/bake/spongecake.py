@@ -55,8 +55,9 @@ ALPHA_RANGE = (0.01, 1.0)
 G_MAX = 0.95
 THICKNESS_IN = (0.01, 10.0)
 THICKNESS_OUT = (0.01, 20.0)
-MS_VERSION = 5  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
-# stack's scale over the view's azimuth too (``nodes.spongecake.view_inputs``), 5 the energy budget (``energy_budget``)
+MS_VERSION = 6  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
+# stack's scale over the view's azimuth too (``nodes.spongecake.view_inputs``), 5 the energy budget (``energy_budget``),
+# 6 its view tables made safe along the view cosine too (``budget_rows``)
 NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 
@@ -288,42 +289,69 @@ def whiteness_of(params: model.Params) -> np.ndarray:
 
 
 def budget_rows(params: model.Params, left_of, lobes_of, rows: int, phi, substeps: int,
-                phi_substeps: int = 1) -> np.ndarray:
-    """The Cycles forms' energy budget (``energy_budget``; rows, len(phi), 3) on ``models.spongecake.energy_cosines
-    (rows)`` and the azimuths ``phi`` (uniform over the circle from 0 where there are several), interpolated
-    linearly between them and made safe between them (``safe_between``): computed ``substeps`` times finer in √μ and
-    lowered where it caps single scattering; with ``phi_substeps`` > 1, as many times finer in the azimuth and
-    lowered wherever interpolating across an azimuth interval would exceed it."""
-    fine_mu = np.asarray(model.energy_cosines((rows - 1) * substeps + 1))
+                phi_substeps: int = 1, cosines=model.energy_cosines) -> np.ndarray:
+    """The Cycles forms' energy budget (``energy_budget``; rows, len(phi), 3) on the view cosines ``cosines(rows)``
+    (the knots' ``models.spongecake.energy_cosines``, uniform in √μ, or the view tables' ``view_table_cosines``) and
+    the azimuths ``phi`` (uniform over the circle from 0 where there are several), interpolated linearly between them
+    and made safe between them (``safe_between``), computed ``substeps`` times finer along the rows' coordinate.
+    With ``phi_substeps`` 1 (the knots of isotropic stacks, whose budget is smooth) the rows are lowered only where
+    the budget caps single scattering. With ``phi_substeps`` > 1 (the view tables of oriented stacks) the budget is
+    as many times finer in the azimuth too, and rows and columns are lowered wherever interpolation would return
+    more light than the finer budget by ``SAFE_TOLERANCE`` (``furnace_weights``): a tilted closure normal that
+    Cycles bends makes the budget leap within a few degrees, near the normal view as well as near grazing."""
+    fine_mu = np.asarray(cosines((rows - 1) * substeps + 1))
     phi = np.asarray(phi, dtype=np.float64)
-    fine_phi = np.asarray(model.uniform_azimuths(len(phi) * phi_substeps)) if phi_substeps > 1 else phi
-    table = safe_between(energy_grid(params, left_of, lobes_of, fine_mu, fine_phi, scale_of=energy_budget), substeps)
-    if phi_substeps > 1:  # the azimuth wraps around: the first column again at the end
-        wrapped = np.concatenate([table, table[:, :1]], axis=1).swapaxes(0, 1)
-        table = safe_between(wrapped, phi_substeps, everywhere=True).swapaxes(0, 1)[:, :-1]
-    return table
+    if phi_substeps == 1:
+        return safe_between(energy_grid(params, left_of, lobes_of, fine_mu, phi, scale_of=energy_budget), substeps)
+    weights = []
+
+    def budget_and_weights(left, lobes, limit):
+        budget = energy_budget(left, lobes, limit)
+        weights.append(furnace_weights(budget, left, lobes))
+        return budget
+
+    fine_phi = np.asarray(model.uniform_azimuths(len(phi) * phi_substeps))
+    fine = energy_grid(params, left_of, lobes_of, fine_mu, fine_phi, scale_of=budget_and_weights)
+    weight = weights[0].reshape(fine.shape)
+    table = safe_between(fine, substeps, weight)
+
+    def wrapped(a):  # the azimuth wraps around: the first column again at the end, columns first
+        return np.concatenate([a, a[:, :1]], axis=1).swapaxes(0, 1)
+
+    return safe_between(wrapped(table), phi_substeps, wrapped(weight[::substeps])).swapaxes(0, 1)[:, :-1]
 
 
-# Interpolation may exceed the budget it interpolates by this much before ``safe_between`` lowers it.
+def furnace_weights(budget, left, lobes):
+    """How much a white furnace's return changes per unit of budget: below 1 the budget scales single scattering and
+    the Dirac (1 − ``left``), above 1 multiple scattering (``lobes``)."""
+    return np.where(budget < 1.0, 1.0 - left, lobes)
+
+
+# Interpolation may exceed the budget it interpolates by this much (of the furnace's return, with weights) before
+# ``safe_between`` lowers it.
 SAFE_TOLERANCE = 1e-3
 
 
-def safe_between(fine, substeps: int, everywhere: bool = False) -> np.ndarray:
+def safe_between(fine, substeps: int, weight=None) -> np.ndarray:
     """Every ``substeps``-th row of ``fine`` (rows along the first axis), lowered so that linear interpolation between
-    the rows does not exceed ``fine`` (at its resolution) by more than ``SAFE_TOLERANCE`` in the intervals where
-    ``fine`` dips below 1 (where the budget caps single scattering), or in every interval with ``everywhere``: there
-    the higher end is lowered as far as needed, and the lower end too where that is not enough. Near grazing, a thin, very rough layer's budget can leap
-    within one interval from below 1 to several, and interpolating across the leap would let the form's single
-    scattering return more light than it receives. Elsewhere the rows are kept: lowering them wherever the budget is
-    convex costs more energy at the rows than it saves between them (docs/training.md)."""
+    the rows does not exceed ``fine`` (at its resolution) by more than ``SAFE_TOLERANCE``: there the higher end is
+    lowered as far as needed, and the lower end too where that is not enough. Without ``weight``, only in the
+    intervals where ``fine`` dips below 1 (where the budget caps single scattering): near grazing, a thin, very rough
+    layer's budget can leap within one interval from below 1 to several, and interpolating across the leap would let
+    the form's single scattering return more light than it receives; elsewhere the rows are kept, since lowering them
+    wherever a smooth budget is convex costs more energy at the rows than it saves between them (docs/training.md).
+    With ``weight`` (``furnace_weights`` at ``fine``'s points), in every interval where the excess times the weight,
+    the light it adds to a white furnace, exceeds the tolerance."""
     rows = fine[::substeps].copy()
     t = (np.arange(substeps + 1) / substeps).reshape((-1,) + (1,) * (fine.ndim - 1))
     for k in range(len(rows) - 1):
         segment = fine[k * substeps:(k + 1) * substeps + 1]
         a, b = rows[k], rows[k + 1]
-        unsafe = ((1.0 - t) * a + t * b - segment).max(axis=0) > SAFE_TOLERANCE
-        if not everywhere:
-            unsafe &= segment.min(axis=0) < 1.0
+        excess = (1.0 - t) * a + t * b - segment
+        if weight is None:
+            unsafe = (excess.max(axis=0) > SAFE_TOLERANCE) & (segment.min(axis=0) < 1.0)
+        else:
+            unsafe = (excess * weight[k * substeps:(k + 1) * substeps + 1]).max(axis=0) > SAFE_TOLERANCE
         if not unsafe.any():
             continue
         first_lower = a <= b

@@ -361,8 +361,8 @@ def white_furnace(sizes: MsSizes) -> list[dict]:
     return out
 
 
-DENSE_THETAS = (0.0, 20.0, 40.0, 60.0, 70.0, 80.0, 85.0, 88.0)  # the Cycles form's furnace on a denser grid
-DENSE_AZIMUTHS = 24  # of view azimuths (uniform from 0; oriented stacks only)
+DENSE_THETAS = tuple(float(t) for t in range(0, 89, 4))  # the Cycles form's furnace on a denser grid (degrees)
+DENSE_AZIMUTHS = 72  # of view azimuths (uniform from 0; oriented stacks only)
 
 
 def dense_cycles_furnace(sizes: MsSizes) -> np.ndarray:
@@ -578,7 +578,8 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "budget (training.md) caps their single scattering where it alone returns more than it receives, and "
               "the tables are lowered where interpolating between their knots would exceed them."]
     dense = dense_cycles_furnace(sizes)
-    lines += ["", f"The OSL form on a denser grid of views (θo {', '.join(f'{t:g}' for t in DENSE_THETAS)}°; oriented "
+    lines += ["", f"The OSL form on a denser grid of views (θo {DENSE_THETAS[0]:g}° to {DENSE_THETAS[-1]:g}° in steps "
+              f"of {DENSE_THETAS[1] - DENSE_THETAS[0]:g}°; oriented "
               f"stacks at {DENSE_AZIMUTHS} azimuths; {dense.size} (stack, view) cases): mean |1 − a| "
               f"{pct(np.mean(np.abs(1.0 - dense)))}, worst {pct(np.max(np.abs(1.0 - dense)))}, largest "
               f"{dense.max():.4f}; above {goal_max:g} in {pct(np.mean(dense > goal_max))} of the cases."]

@@ -196,6 +196,19 @@ def energy_cosines(count: int = ENERGY_KNOTS):
     return [(lo + (1.0 - lo) * k / (count - 1)) ** 2 for k in range(count - 1)] + [1.0]
 
 
+def view_table_cosines(count: int):
+    """``count`` view cosines uniform in asin(√μ) from the first knot's (``energy_cosines``) to π/2 (the view tables'
+    rows, ``nodes.view_table``): near the normal uniform in the view's angle (asin(√cos θ) ≈ π/2 − θ/√2), near
+    grazing in √μ, as a list; the last is exactly 1."""
+    lo = view_table_lowest()
+    return [math.sin(lo + (0.5 * math.pi - lo) * k / (count - 1)) ** 2 for k in range(count - 1)] + [1.0]
+
+
+def view_table_lowest() -> float:
+    """asin(√μ) of the view tables' first row: the energy tables' first knot."""
+    return math.asin(MIN_ENERGY_COS ** 0.5)
+
+
 def uniform_azimuths(count: int):
     """``count`` view azimuths uniform over the circle from 0 (the energy tables' columns), as a list."""
     return [2.0 * math.pi * k / count for k in range(count)]

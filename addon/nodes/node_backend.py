@@ -262,6 +262,9 @@ class NodeBackend:
     def sin(self, x):
         return self._math("SINE", x)
 
+    def asin(self, x):
+        return self._math("ARCSINE", x)  # Cycles' safe_asinf clamps to [-1, 1]
+
     def atan2(self, y, x):
         return self._math("ARCTAN2", y, x)
 

@@ -44,7 +44,8 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
   where the table is convex); multiple scattering takes max(e − 1, 0). Where the form's own single scattering and
   Dirac return more than 1 − m (thin, very rough layers near grazing), e < 1 and they are scaled by min(e, 1).
   Where a layer is oriented off the normal the scale follows the view's azimuth too: the material feeds every knot from a packed float image of it
-  over √μ and the azimuth, looked up at the view (``view_inputs``, ``view_table``, ``view_wiring``); a
+  over asin(√μ) (the view's angle near the normal, √μ near grazing) and the azimuth, looked up at the view
+  (``view_inputs``, ``view_table``, ``view_wiring``); a
   texture-driven bake keeps the material's own scale for every texel. [approx: ms-energy]
 
 The node-group form also evaluates Schlick's F at h = flake normal [approx: schlick-at-view];
@@ -110,7 +111,7 @@ APPROXIMATIONS = {
                                      "substrate": {"type": "dielectric", "roughness": 0.3, "ior": 1.5}}),
     "ms-energy": ("multiple scattering's energy scale on the form's own single scattering (not the reference's; "
                   "where that exceeds 1, it is scaled down), on 8 view cosines, linear between them (an oriented "
-                  "stack's: a 32 x 64 table over √μ and the azimuth, bilinear; the reference bounds the interpolation's error); one per material in "
+                  "stack's: a 32 x 64 table over asin(√μ) and the azimuth, bilinear; the reference bounds the interpolation's error); one per material in "
                   "texture-driven bakes",
                   {**_one(type="surface", roughness=0.5, thickness=1.0), "multiple_scattering": True}),
     "ms-weights-at-normal": ("the multiple-scattering closures' weights are the layer math's for the view along "
@@ -336,8 +337,8 @@ def _lobe_values(p: model.Params) -> dict:
 # The albedos behind ``energy_values``: GGX reflection by its own quadrature (flakes may be near-mirrors), the other
 # closures on a direction grid a quarter of the default.
 ENERGY_QUADRATURE = (32, 64)
-# The budget behind the knots and the view tables' rows is computed this many times finer in √μ
-# (``bake.spongecake.budget_rows``), so that it is safe between them too.
+# The budget behind the knots and the view tables' rows is computed this many times finer along their coordinate
+# (√μ, asin(√μ); and the azimuth) (``bake.spongecake.budget_rows``), so that it is safe between them too.
 BUDGET_SUBSTEPS = 4
 VIEW_BUDGET_SUBSTEPS = (2, 2)
 
@@ -374,8 +375,9 @@ def _view_energy(p: model.Params, weights: str):
     from .view_table import ViewTable
 
     rows, azimuths = model.VIEW_ENERGY_GRID
-    table = budget_rows(p, _left, _ms_furnace, rows, model.uniform_azimuths(azimuths), *VIEW_BUDGET_SUBSTEPS)
-    return ViewTable(table, math.sqrt(model.MIN_ENERGY_COS))
+    table = budget_rows(p, _left, _ms_furnace, rows, model.uniform_azimuths(azimuths), *VIEW_BUDGET_SUBSTEPS,
+                        cosines=model.view_table_cosines)
+    return ViewTable(table, model.view_table_lowest())
 
 
 def ms_share(p: model.Params) -> float:

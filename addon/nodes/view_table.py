@@ -6,9 +6,10 @@ Geometry node, but a table over the azimuth as well (an oriented SpongeCake stac
 per-material image: ``view_wiring`` feeds a Lamina node's inputs from one, and ``NumpyBackend.input`` evaluates a
 ``ViewTable`` at its views with ``at``, so the numpy prediction renders what Cycles renders.
 
-The texel grid: row r (image row r from the bottom) at √μ = lowest + (1 − lowest) r / (rows − 1), μ the view's cosine
-with the shading normal (at least ``expr.MIN_COS``, as the closures' own); column c at azimuth 2π c / azimuths from the
-Geometry node's tangent T towards N × T, and one column more repeating the first, so the azimuth wraps around.
+The texel grid: row r (image row r from the bottom) at asin(√μ) = lowest + (π/2 − lowest) r / (rows − 1), μ the view's
+cosine with the shading normal (at least ``expr.MIN_COS``, as the closures' own): rows uniform in the view's angle
+near the normal and in √μ near grazing; column c at azimuth 2π c / azimuths from the Geometry node's tangent T
+towards N × T, and one column more repeating the first, so the azimuth wraps around.
 """
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ from .expr import MIN_COS
 @dataclass(frozen=True, eq=False)
 class ViewTable:
     values: np.ndarray  # (rows, azimuths, 3)
-    lowest: float  # √μ of the first row
+    lowest: float  # asin(√μ) of the first row
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -46,10 +47,10 @@ class ViewTable:
 
     def texel_coordinates(self):
         """(scale, offset) of the image's x and y coordinates: x = azimuth / 2π · scale + offset and
-        y = √μ · scale + offset place each value at its texel's centre (Cycles reads texel i at (i + ½) / width)."""
+        y = asin(√μ) · scale + offset place each value at its texel's centre (Cycles reads texel i at (i + ½) / width)."""
         rows, azimuths = self.shape
         x = (azimuths / (azimuths + 1.0), 0.5 / (azimuths + 1.0))
-        per_row = (rows - 1) / (1.0 - self.lowest)
+        per_row = (rows - 1) / (0.5 * math.pi - self.lowest)
         y = (per_row / rows, (0.5 - self.lowest * per_row) / rows)
         return x, y
 
@@ -59,7 +60,7 @@ class ViewTable:
         (sx, ox), (sy, oy) = self.texel_coordinates()
         turn = np.mod(np.arctan2(wo[:, 1], wo[:, 0]), 2.0 * math.pi) / (2.0 * math.pi)
         x = (turn * sx + ox) * (self.shape[1] + 1) - 0.5
-        y = (np.sqrt(np.maximum(wo[:, 2], MIN_COS)) * sy + oy) * self.shape[0] - 0.5
+        y = (np.arcsin(np.sqrt(np.minimum(np.maximum(wo[:, 2], MIN_COS), 1.0))) * sy + oy) * self.shape[0] - 0.5
         return _bilinear(self.pixels()[..., :3].astype(np.float64), x, y)
 
 

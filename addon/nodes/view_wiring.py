@@ -79,14 +79,14 @@ def _coordinates_group(table):
     """The nested group whose output is the view's texel coordinates in ``table``'s image (``ViewTable.at``)."""
     (sx, ox), (sy, oy) = table.texel_coordinates()
     rows, azimuths = table.shape
-    name = f"Lamina view coordinates {rows}x{azimuths} from {table.lowest:.6g}"
+    name = f"Lamina view coordinates {rows}x{azimuths} asin from {table.lowest:.6g}"
     return shared_group(name, lambda b: [_coordinates(b, sx, ox, sy, oy)], [])
 
 
 def _coordinates(b: NodeBackend, sx, ox, sy, oy):
     view, normal, tangent = b.view(), b.normal(), b.tangent()
     turn = b.fract(b.atan2(b.dot(view, b.cross(normal, tangent)), b.dot(view, tangent)) * (0.5 / math.pi))
-    return b.combine(b.multiply_add(turn, sx, ox), b.multiply_add(b.sqrt(b.cos_view()), sy, oy), 0.0)
+    return b.combine(b.multiply_add(turn, sx, ox), b.multiply_add(b.asin(b.sqrt(b.cos_view())), sy, oy), 0.0)
 
 
 def _unused(tree) -> list:

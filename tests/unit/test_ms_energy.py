@@ -168,6 +168,24 @@ def test_safe_between_lowers_rows_only_where_a_dip_below_one_would_be_interpolat
     np.testing.assert_array_equal(bake.safe_between(convex, 4), convex[::4])
 
 
+def test_with_weights_safe_between_lowers_a_leap_above_one_by_the_light_it_would_add():
+    """The view tables' rule: a budget that leaps while staying above 1 (multiple scattering's share changes fast near
+    a view where Cycles bends a tilted closure normal) is made safe wherever its excess times the weight (the light
+    it adds to a white furnace) exceeds the tolerance; a convex budget whose excess adds little light keeps its
+    rows; without weights the leap above 1 is kept (the knots' rule)."""
+    u = np.linspace(0.0, 1.0, 9)[:, None]
+    leap = np.where(u < 0.9, 3.0 + 0.2 * u, 3.6)  # jumps in the last fine interval
+    weight = np.full_like(leap, 0.35)
+    rows = bake.safe_between(leap, 4, weight)
+    interpolated = np.interp(u[:, 0], [0.0, 0.5, 1.0], rows[:, 0])
+    assert np.all((interpolated - leap[:, 0]) * weight[:, 0] <= bake.SAFE_TOLERANCE + 1e-12)
+    as_it_was = np.interp(u[:, 0], [0.0, 0.5, 1.0], leap[::4, 0])
+    assert ((as_it_was - leap[:, 0]) * weight[:, 0]).max() > 0.05  # 5% more light between the plain rows
+    np.testing.assert_array_equal(bake.safe_between(leap, 4), leap[::4])
+    convex = 1.5 + 0.02 * (u - 0.5) ** 2  # 0.00125 above between its rows: 0.04% of the furnace
+    np.testing.assert_array_equal(bake.safe_between(convex, 4, weight), convex[::4])
+
+
 # A thin, very rough layer seen near grazing: the forms' single scattering and Dirac alone return more than 1
 # (mirror-G and the Lambert translucency each take much of what the layer intercepts).
 THIN_ROUGH = {

@@ -1,39 +1,42 @@
-"""``nodes.view_table.ViewTable``: a table over the view's √μ and azimuth looked up as Cycles looks up its image."""
+"""``nodes.view_table.ViewTable``: a table over the view's asin(√μ) and azimuth looked up as Cycles looks up its
+image."""
 import math
 
 import numpy as np
+import pytest
 
 from addon.nodes.view_table import ViewTable
 from addon.reference.frames import spherical
 
-LOWEST = math.sqrt(0.02)
+LOWEST = math.asin(math.sqrt(0.02))
 
 
 def _table(rows=5, azimuths=8, seed=0):
     return ViewTable(np.random.default_rng(seed).uniform(0.2, 2.0, (rows, azimuths, 3)), LOWEST)
 
 
-def _views(root, phi):
-    return spherical(np.asarray(root, dtype=float) ** 2, np.asarray(phi, dtype=float))
+def _views(angle, phi):
+    """Views at asin(√μ) = ``angle``."""
+    return spherical(np.sin(np.asarray(angle, dtype=float)) ** 2, np.asarray(phi, dtype=float))
 
 
 def test_the_lookup_returns_the_values_at_their_texel_centres():
     t = _table()
     rows, azimuths = t.shape
     r, c = np.meshgrid(np.arange(rows - 1), np.arange(azimuths), indexing="ij")  # the last row sees along the normal
-    root = LOWEST + (1.0 - LOWEST) * r.ravel() / (rows - 1)
-    got = t.at(_views(root, 2.0 * math.pi * c.ravel() / azimuths))
+    angle = LOWEST + (0.5 * math.pi - LOWEST) * r.ravel() / (rows - 1)
+    got = t.at(_views(angle, 2.0 * math.pi * c.ravel() / azimuths))
     np.testing.assert_allclose(got, t.values[r.ravel(), c.ravel()], rtol=1e-6)
 
 
 def test_between_texels_it_is_bilinear_and_the_azimuth_wraps_around():
     t = _table()
     rows, azimuths = t.shape
-    step = (1.0 - LOWEST) / (rows - 1)
-    root, phi = LOWEST + 1.25 * step, 2.0 * math.pi * (azimuths - 0.5) / azimuths  # between the last and first column
+    step = (0.5 * math.pi - LOWEST) / (rows - 1)
+    angle, phi = LOWEST + 1.25 * step, 2.0 * math.pi * (azimuths - 0.5) / azimuths  # between the last and first column
     v = t.values.astype(np.float32).astype(float)
     expected = 0.75 * 0.5 * (v[1, -1] + v[1, 0]) + 0.25 * 0.5 * (v[2, -1] + v[2, 0])
-    np.testing.assert_allclose(t.at(_views([root], [phi]))[0], expected, rtol=1e-6)
+    np.testing.assert_allclose(t.at(_views([angle], [phi]))[0], expected, rtol=1e-6)
 
 
 def test_views_closer_to_grazing_than_the_first_row_take_its_values():
@@ -45,3 +48,16 @@ def test_views_closer_to_grazing_than_the_first_row_take_its_values():
 def test_the_image_name_follows_the_values():
     assert _table(seed=1).name == _table(seed=1).name != _table(seed=2).name
     assert _table().pixels().shape == (5, 9, 4)
+
+
+def test_the_rows_are_dense_near_the_normal_and_near_grazing():
+    """``view_table_cosines``: from the energy knots' first cosine to exactly 1, in steps of at most 4.2° of the view's
+    angle near the normal (the budget of a strongly tilted flake layer changes within a few degrees of it) and of at
+    most 0.016 in μ near grazing (√μ rows: 19° and 0.009), for the 32 rows that the tables have."""
+    from addon.models import spongecake as model
+
+    rows = model.VIEW_ENERGY_GRID[0]
+    mu = np.array(model.view_table_cosines(rows))
+    assert mu[0] == pytest.approx(model.energy_cosines()[0]) and mu[-1] == 1.0 and np.all(np.diff(mu) > 0)
+    assert math.degrees(math.acos(mu[-2])) < 4.2 < math.degrees(math.acos(model.energy_cosines(rows)[-2]))
+    assert mu[1] - mu[0] < 0.016
