@@ -574,9 +574,9 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "view's azimuth too. Between the knots the reference interpolates bilinearly less an estimate of the "
               "interpolation's error where the table is convex, so that a view between knots takes no more than "
               "they allow. The Cycles forms interpolate linearly in √μ; for an oriented stack they look the scale up "
-              "in a table over √μ and the azimuth (a packed float image, bilinear) without that estimate; an energy "
-              "budget (training.md) caps their single scattering where it alone returns more than it receives, and "
-              "the tables are lowered where interpolating between their knots would exceed them."]
+              "in a table over asin(√μ) and the azimuth (a packed float image, bilinear) without that estimate; an "
+              "energy budget (training.md) caps their single scattering where it alone returns more than it "
+              "receives, and the tables are lowered where interpolating between their knots would exceed them."]
     dense = dense_cycles_furnace(sizes)
     lines += ["", f"The OSL form on a denser grid of views (θo {DENSE_THETAS[0]:g}° to {DENSE_THETAS[-1]:g}° in steps "
               f"of {DENSE_THETAS[1] - DENSE_THETAS[0]:g}°; oriented "
