@@ -1,10 +1,11 @@
-"""How close the paper's lobe form can come to the Monte Carlo data at all: W1 f_ss(params') + W2 / pi with every
-output optimised for each held-out configuration on its own (no network), starting from the shipped network's
+"""How close the lobe form can come to the Monte Carlo data at all: W1 f_ss(params') + W2 / pi (the paper's) or
+that plus the forward lobe f_ss(forward) (``--forward``; ``addon.bake.spongecake``), with every output optimised for each held-out configuration on its own (no network), starting from the shipped network's
 prediction. The gap between this bound and the network is what more data and training can win; what is left at the
 bound is the lobe form's own (issue 15's goal of 25% mean lobe error is measured against it in docs/training.md).
 
     python -m training.lobe_bound            # both layer counts of the shipped held-out set, a few minutes
     python -m training.lobe_bound --halves   # one layer, as two identical halves through the two-layer form
+    python -m training.lobe_bound --forward  # with the forward lobe (an HG layer's single scattering)
 
 The loss is the score itself: the relative L1 error of f |cos wo| over each configuration's stored pairs
 (``validation.lobe_errors``), optionally plus ``--energy`` times the relative error of its energy (the training
@@ -25,18 +26,27 @@ from addon.bake import spongecake as ms
 from training import train
 
 
-def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0) -> np.ndarray:
-    """f |cos wo| (C, n_wi, n_wo, 3) of the lobe form with its outputs optimised per configuration."""
+def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward: bool = False) -> np.ndarray:
+    """f |cos wo| (C, n_wi, n_wo, 3) of the lobe form, with the forward lobe or without, with its outputs optimised
+    per configuration (started from the shipped network's; the forward lobe's from ``train.FORWARD_START`` where that
+    network has none)."""
     rows, wi, wo = train.tensors(data)
     truth = train.target(data)
     total = truth.sum(dim=(1, 2, 3)).clamp_min(1e-12)
     start = ms.network(rows.shape[1])(ms.features(data["rows"].astype(np.float64)))
-    raw = torch.tensor(start, dtype=torch.float64, requires_grad=True)
+    kept = train.outputs(rows.shape[1]) - ms.FORWARD_OUTPUTS
+    if forward and start.shape[1] == kept:
+        start = np.concatenate([start, np.tile(train.FORWARD_START, (len(start), 1))], axis=1)
+    raw = torch.tensor(start if forward else start[:, :kept], dtype=torch.float64, requires_grad=True)
+
+    def predicted_lobes():
+        return train.predicted_lobe(lambda x: raw, rows, wi, wo)
+
     opt = torch.optim.Adam([raw], lr=rate)
     for step in range(steps):
         for group in opt.param_groups:
             group["lr"] = rate * 0.5 * (1.0 + math.cos(math.pi * step / steps)) + 1e-5
-        predicted = train.predicted_lobe(lambda x: raw, rows, wi, wo)
+        predicted = predicted_lobes()
         lobe = (predicted - truth).abs().sum(dim=(1, 2, 3)) / total
         gained = (predicted.sum(dim=(1, 2, 3)) - truth.sum(dim=(1, 2, 3))).abs() / total
         loss = (lobe + energy * gained).sum()
@@ -44,7 +54,7 @@ def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0) -> np.n
         loss.backward()
         opt.step()
     with torch.no_grad():
-        return train.predicted_lobe(lambda x: raw, rows, wi, wo).cpu().numpy()
+        return predicted_lobes().cpu().numpy()
 
 
 def halved(data: dict) -> dict:
@@ -63,15 +73,16 @@ def main(argv=None) -> int:
     ap.add_argument("--energy", type=float, default=0.0, help="weight of the energy error in the loss")
     ap.add_argument("--halves", action="store_true",
                     help="one layer only: the two-layer form on the layer cut in two halves (--validation's 1 layer)")
+    ap.add_argument("--forward", action="store_true", help="with the forward lobe (an HG layer's single scattering; without it the paper's form)")
     a = ap.parse_args(argv)
     torch.set_num_threads(1)
     for n_layers in (1,) if a.halves else range(1, ms.NETWORK_LAYERS + 1):
         data = validation.load_shards(a.validation, n_layers)
         form = halved(data) if a.halves else data
         for label, predicted in (("network", validation.predicted_lobes(form, energy=False)),
-                                 ("bound", best_lobes(form, a.steps, a.rate, a.energy))):
+                                 ("bound", best_lobes(form, a.steps, a.rate, a.energy, a.forward))):
             scores = validation.lobe_errors(data, predicted)
-            print(json.dumps({"layers": n_layers, "halves": a.halves, "lobes": label, "steps": a.steps,
+            print(json.dumps({"layers": n_layers, "halves": a.halves, "forward": a.forward, "lobes": label, "steps": a.steps,
                               "energy_weight": a.energy,
                               **{k: v for k, v in scores.items() if k != "per_config"}}), flush=True)
     return 0

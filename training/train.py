@@ -1,10 +1,10 @@
 """Train the SpongeCake multiple-scattering networks (Wang et al. 2022, Sec. 5 "Training") and export them.
 
-One MLP per layer count: ``L * FEATURES`` inputs, three hidden layers of 128 SiLU units, ``L * OUTPUTS + 3``
-outputs (``addon.bake.spongecake`` documents the encoding). SiLU rather than ReLU: the predicted parameters
+One MLP per layer count: ``L * FEATURES`` inputs, three hidden layers of 128 SiLU units,
+``L * OUTPUTS + WEIGHT_OUTPUTS + FORWARD_OUTPUTS`` outputs (``addon.bake.spongecake`` documents the encoding). SiLU rather than ReLU: the predicted parameters
 are then smooth (C-infinity) functions of the layer parameters, so texture-driven bakes vary smoothly between
 texels, and no unit dies on a small dataset. Loss: MAE between the Monte Carlo multiple-scattering lobe and
-W1 f_ss(params') + W2 / pi, both times |cos wo| (the differentiable ``training.spongecake_torch.eval_stack``),
+W1 f_ss(params') + W2 / pi + f_ss(forward), both times |cos wo| (the differentiable ``training.spongecake_torch.eval_stack``),
 AdamW (weight decay 1e-4), learning rate 1e-3 with cosine decay, the checkpoint with the best split-validation
 loss kept, mini-batches of 32 configurations (every direction pair of a
 configuration in the same batch). 10% of the configurations are held out for validation; the shipped,
@@ -67,8 +67,16 @@ class TorchOps:
         return torch.cat(parts, dim=axis)
 
 
+# The forward lobe's raw outputs at the start: g = 0.98 tanh(1) = 0.75, albedo softplus(-5) ≈ 0.007, T rho 1.
+FORWARD_START = (1.0, -5.0, -5.0, -5.0, 0.0)
+
+
+def outputs(n_layers: int) -> int:
+    return n_layers * ms.OUTPUTS + ms.WEIGHT_OUTPUTS + ms.FORWARD_OUTPUTS
+
+
 def make_network(n_layers: int) -> torch.nn.Sequential:
-    sizes = (n_layers * ms.FEATURES, *HIDDEN, n_layers * ms.OUTPUTS + ms.WEIGHT_OUTPUTS)
+    sizes = (n_layers * ms.FEATURES, *HIDDEN, outputs(n_layers))
     modules = []
     for i in range(len(sizes) - 1):
         modules.append(torch.nn.Linear(sizes[i], sizes[i + 1]))
@@ -78,7 +86,8 @@ def make_network(n_layers: int) -> torch.nn.Sequential:
     with torch.no_grad():
         last.weight.mul_(0.1)
         last.bias.zero_()
-        last.bias[-ms.WEIGHT_OUTPUTS:] = -5.0  # start with small lobes
+        last.bias[-ms.WEIGHT_OUTPUTS - ms.FORWARD_OUTPUTS:] = -5.0  # start with small lobes
+        last.bias[-ms.FORWARD_OUTPUTS:] = torch.tensor(FORWARD_START)
     return torch.nn.Sequential(*modules).double().to(DEVICE)
 
 
@@ -91,7 +100,8 @@ def to_mlp(net: torch.nn.Sequential, manifest: dict) -> mlp.MLP:
 # ------------------------------------------------------------------------------------------------ loss
 
 def predicted_lobe(net, rows: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
-    """W1 f_ss(params') + W2 / pi for B configurations at their (n_wi x n_wo) pairs, times |cos wo|: (B, n_wi, n_wo, 3)."""
+    """W1 f_ss(params') + W2 / pi + f_ss(forward) for B configurations at their (n_wi x n_wo) pairs, times |cos wo|:
+    (B, n_wi, n_wo, 3)."""
     x = torch.as_tensor(ms.features(rows.cpu().numpy()), device=rows.device)
     lobe, weights = ms.decode(net(x), rows, TorchOps)
     layers = [LayerBatch(kind=lobe[:, k, layer_rows.TYPE].round().long(), roughness=lobe[:, k, layer_rows.ROUGHNESS],
@@ -101,9 +111,13 @@ def predicted_lobe(net, rows: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor) 
     b, n_wi, n_wo = wi.shape[0], wi.shape[1], wo.shape[1]
     big_wi = wi[:, :, None, :].expand(b, n_wi, n_wo, 3).reshape(b, -1, 3)
     big_wo = wo[:, None, :, :].expand(b, n_wi, n_wo, 3).reshape(b, -1, 3)
-    f = eval_stack(layers, big_wi, big_wo)
+    forward = LayerBatch(kind=torch.full((b,), 2, dtype=torch.long, device=rows.device),
+                         roughness=weights[:, ms.FORWARD_G], albedo=weights[:, ms.FORWARD_ALBEDO],
+                         thickness=weights[:, ms.FORWARD_THICKNESS], f0=torch.ones_like(weights[:, ms.FORWARD_ALBEDO]),
+                         orientation=lobe[:, 0, layer_rows.ORIENTATION])  # ignored by hg layers
+    f = eval_stack(layers, big_wi, big_wo) + eval_stack([forward], big_wi, big_wo)
     same = ((big_wi[..., 2] > 0) == (big_wo[..., 2] > 0)).unsqueeze(-1)
-    lambert = torch.where(same, weights[:, None, 0:3], weights[:, None, 3:6]) / math.pi
+    lambert = torch.where(same, weights[:, None, ms.W2R], weights[:, None, ms.W2T]) / math.pi
     return ((f + lambert) * big_wo[..., 2:].abs()).reshape(b, n_wi, n_wo, 3)
 
 
@@ -246,7 +260,7 @@ def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path
              if k != "per_config"}
     manifest = {
         "model": "spongecake multiple scattering", "layers": n_layers, "inputs": n_layers * ms.FEATURES,
-        "hidden": list(HIDDEN), "activation": "silu", "outputs": n_layers * ms.OUTPUTS + ms.WEIGHT_OUTPUTS,
+        "hidden": list(HIDDEN), "activation": "silu", "outputs": outputs(n_layers),
         "training_configs": info["train_configs"], "pairs_per_config": int(data["ms"].shape[1] * data["ms"].shape[2]),
         "paths_per_wi": metas[0]["paths"], "max_depth": metas[0]["max_depth"], "dataset_seed": metas[0]["seed"],
         "dataset_version": metas[0]["version"], "epochs": info["epochs"], "steps": info["steps"], "best_step": info["best_step"],

@@ -3,8 +3,13 @@
 The multiple-scattering part of f for a stack of 1 or 2 layers (no substrate, light from above; deeper stacks below) is modelled as
 
     f_ms(wi, wo) = W1 f_ss(params', wi, wo) + W2r / pi [wi, wo on one side] + W2t / pi [opposite sides]
+                   + f_ss(forward, wi, wo)
 
-where params' has the same layer types, count and Fresnel structure as params. The paper's single
+where params' has the same layer types, count and Fresnel structure as params, and ``forward`` is one HG layer
+(mean cosine g, RGB albedo carrying its weight, thickness; not in the paper). The forward lobe is there for the
+even orders of low-roughness flakes: two mirror reflections about one flake normal undo each other, so that light
+continues close to its own direction, where the flake-shaped lobe puts nothing (docs/training.md measures what it
+wins). A network without its outputs (``FORWARD_OUTPUTS``) predicts none (albedo 0). The paper's single
 Lambertian weight W2 is split into reflection and transmission weights, because a thick layer sends far more
 multiply scattered light back than through, and each is RGB, because multiple scattering is more saturated
 than single scattering (γ^n) and grey Lambert weights cannot follow it (docs/training.md).
@@ -20,7 +25,9 @@ W1 is folded into the lobe's albedo (f_ss is linear in it), so a prediction is a
 Encoding (per layer, ``FEATURES`` = 14 inputs): type one-hot (3); roughness as log alpha mapped from
 [0.01, 1] to [-1, 1] for flakes, g / 0.95 for hg; 2 albedo - 1 (3); log T rho mapped from [0.01, 10] to [-1, 1];
 2 f0 - 1 (3); orientation with z >= 0 (3; zero for hg). Inputs beyond the training ranges are clamped.
-Decoding (per layer, ``OUTPUTS`` = 11 raw values, then ``WEIGHT_OUTPUTS`` = 7 for W1, W2r RGB, W2t RGB): each
+Decoding (per layer, ``OUTPUTS`` = 11 raw values, then ``WEIGHT_OUTPUTS`` = 7 for W1, W2r RGB, W2t RGB, then
+``FORWARD_OUTPUTS`` = 5 for the forward lobe: g = ``FORWARD_G_MAX`` tanh(.), albedo softplus(.) RGB, T rho moved
+from 1 like the layers' thickness): each
 lobe parameter is a residual on the layer's own (``decode``): alpha' in [0.01, 1], g' in (-0.95, 0.95),
 albedo' and f0' in (0, 1) (f0' = 1 for layers without Fresnel), T rho' in [0.01, 20],
 orientation' = normalize(orientation + tanh(.)); W = softplus(.). ``decode`` is written against an
@@ -51,13 +58,17 @@ WEIGHTS = Path(__file__).parent / "weights"
 FEATURES = 14
 OUTPUTS = 11
 WEIGHT_OUTPUTS = 7  # W1, W2r RGB, W2t RGB
+FORWARD_OUTPUTS = 5  # the forward lobe's g, albedo RGB, T rho
+FORWARD_G_MAX = 0.98
+# The decoded weights' columns (``decode``): W2r RGB, W2t RGB, then the forward lobe's g, albedo RGB and T rho.
+W2R, W2T, FORWARD_G, FORWARD_ALBEDO, FORWARD_THICKNESS = slice(0, 3), slice(3, 6), 6, slice(7, 10), 10
 ALPHA_RANGE = (0.01, 1.0)
 G_MAX = 0.95
 THICKNESS_IN = (0.01, 10.0)
 THICKNESS_OUT = (0.01, 20.0)
-MS_VERSION = 6  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
+MS_VERSION = 7  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
 # stack's scale over the view's azimuth too (``nodes.spongecake.view_inputs``), 5 the energy budget (``energy_budget``),
-# 6 its view tables made safe along the view cosine too (``budget_rows``)
+# 6 its view tables made safe along the view cosine too (``budget_rows``), 7 the forward lobe (``decode``)
 NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 
@@ -148,13 +159,14 @@ def _log_range(x, lo, hi, ops, r):
 
 
 def decode(raw, rows, ops=NumpyOps):
-    """Raw network outputs (N, L * OUTPUTS + 7) and the input rows (N, L, ROW) → (lobe rows (N, L, ROW) with W1
-    folded into the albedo, Lambert weights (N, 6) = (W2r RGB, W2t RGB)). ``ops`` is the array namespace (numpy
-    or torch). Every lobe parameter is a residual on the layer's own value (a zero output keeps it), moved in an
-    unbounded coordinate: the logit of albedo and f0, of the log-position of α and Tρ in their ranges, atanh of g."""
+    """Raw network outputs (N, L * OUTPUTS + 7 [+ 5]) and the input rows (N, L, ROW) → (lobe rows (N, L, ROW) with
+    W1 folded into the albedo, weights (N, 11): W2r RGB, W2t RGB and the forward lobe's g, albedo RGB, Tρ (columns
+    ``W2R`` ...; albedo 0 without ``FORWARD_OUTPUTS``)). ``ops`` is the array namespace (numpy or torch). Every lobe
+    parameter is a residual on the layer's own value (a zero output keeps it), moved in an unbounded coordinate: the
+    logit of albedo and f0, of the log-position of α and Tρ in their ranges, atanh of g."""
     n_layers = rows.shape[1]
     layers = []
-    weights = ops.softplus(raw[:, n_layers * OUTPUTS:])
+    weights = ops.softplus(raw[:, n_layers * OUTPUTS:n_layers * OUTPUTS + WEIGHT_OUTPUTS])
     for k in range(n_layers):
         r = raw[:, k * OUTPUTS:(k + 1) * OUTPUTS]
         row = rows[:, k]
@@ -170,7 +182,19 @@ def decode(raw, rows, ops=NumpyOps):
         o = row[:, rows_.ORIENTATION] + ops.tanh(r[:, 8:11])
         o = o / ops.sqrt(ops.sum_last(o * o) + 1e-12)
         layers.append(ops.concat([kind, rough, albedo, thickness, f0, o], axis=1))
-    return ops.stack(layers, axis=1), weights[:, 1:7]
+    return ops.stack(layers, axis=1), ops.concat([weights[:, 1:7], _forward(raw, n_layers, ops)], axis=1)
+
+
+def _forward(raw, n_layers: int, ops):
+    """The forward lobe's (g, albedo RGB, Tρ) (N, 5) from the last ``FORWARD_OUTPUTS`` raw outputs; (0, 0, 0, 0, 1)
+    for a network without them."""
+    start = n_layers * OUTPUTS + WEIGHT_OUTPUTS
+    zero = 0.0 * raw[:, :1]
+    if raw.shape[1] < start + FORWARD_OUTPUTS:
+        return ops.concat([zero, zero, zero, zero, zero + 1.0], axis=1)
+    r = raw[:, start:start + FORWARD_OUTPUTS]
+    return ops.concat([FORWARD_G_MAX * ops.tanh(r[:, 0:1]), ops.softplus(r[:, 1:4]),
+                       _log_range(zero + 1.0, *THICKNESS_OUT, ops, r[:, 4:5])], axis=1)
 
 
 # ------------------------------------------------------------------------------------------ inference
@@ -210,8 +234,8 @@ def lumped_rows(rows: np.ndarray):
 
 
 def grouped_raw(raw: np.ndarray, groups: np.ndarray) -> np.ndarray:
-    """The two-layer network's raw outputs (N, 2 OUTPUTS + 7) spread to L layers (N, L OUTPUTS + 7): each layer
-    takes its group's residuals, the Lambert weights stay."""
+    """The two-layer network's raw outputs (N, 2 OUTPUTS + 7 [+ 5]) spread to L layers (N, L OUTPUTS + 7 [+ 5]): each
+    layer takes its group's residuals, the weights and the forward lobe stay."""
     layer_part = raw[:, :2 * OUTPUTS].reshape(len(raw), 2, OUTPUTS)
     per_layer = np.take_along_axis(layer_part, groups[:, :, None], axis=1)
     return np.concatenate([per_layer.reshape(len(raw), -1), raw[:, 2 * OUTPUTS:]], axis=1)
@@ -224,9 +248,11 @@ class Prediction:
     lobe: model.Params
     reflection: tuple  # W2r, RGB
     transmission: tuple  # W2t, RGB
+    forward: model.Params  # the forward lobe: one hg layer
     lobe_below: model.Params
     reflection_below: tuple
     transmission_below: tuple
+    forward_below: model.Params
 
 
 @lru_cache(maxsize=256)
@@ -247,8 +273,14 @@ def _both_sides(params: model.Params) -> np.ndarray:
 def _prediction(lobes, weights) -> Prediction:
     above = rows_.params_from_rows(lobes[0])
     below = rows_.params_from_rows(rows_.flipped(lobes[1]))
-    return Prediction(above, tuple(weights[0, 0:3]), tuple(weights[0, 3:6]),
-                      below, tuple(weights[1, 0:3]), tuple(weights[1, 3:6]))
+    return Prediction(above, tuple(weights[0, W2R]), tuple(weights[0, W2T]), forward_params(weights[0]),
+                      below, tuple(weights[1, W2R]), tuple(weights[1, W2T]), forward_params(weights[1]))
+
+
+def forward_params(weights) -> model.Params:
+    """The forward lobe of one row of decoded weights (``decode``) as a one-layer hg stack."""
+    return model.Params((model.Layer("hg", float(weights[FORWARD_G]), tuple(map(float, weights[FORWARD_ALBEDO])),
+                                     float(weights[FORWARD_THICKNESS]), (1.0, 1.0, 1.0), (0.0, 0.0, 1.0)),))
 
 
 # ------------------------------------------------------------------------------------ energy scale

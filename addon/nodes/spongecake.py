@@ -167,7 +167,7 @@ def approximations_used(p: model.Params) -> list[str]:
     if len(p.layers) > 1:
         used.add("mirror-attenuation")
     if p.multiple_scattering:
-        used |= {"ms-energy", "ms-weights-at-normal"}
+        used |= {"ms-energy", "ms-weights-at-normal", "lambert-hg", "diffusivity-exit", "scattering-share"}
     return [name for name in APPROXIMATIONS if name in used]
 
 
@@ -253,19 +253,27 @@ MS_WEIGHTS = (
           description="Baked weight W2r (RGB) of the Lambertian multiple-scattering lobe on the light's side"),
     Param("transmission", "Transmission", "color", (0.0, 0.0, 0.0), 0.0, None, texturable=True,
           description="Baked weight W2t (RGB) of the Lambertian multiple-scattering lobe on the far side"),
+    # the forward lobe (one hg layer, ``bake.spongecake``), mapped like an hg layer; in ``decode``'s column order
+    Param("forward_g", "Forward Mean Cosine g", "float", 0.0, -1.0, 1.0, texturable=True,
+          description="Baked mean cosine g of the forward multiple-scattering lobe"),
+    Param("forward_albedo", "Forward Albedo", "color", (0.0, 0.0, 0.0), 0.0, None, texturable=True,
+          description="Baked albedo (its weight, RGB) of the forward multiple-scattering lobe"),
+    Param("forward_thickness", "Forward Thickness", "float", 1.0, 0.0, None, texturable=True,
+          description="Baked optical thickness of the forward multiple-scattering lobe"),
 )
+MS_FORWARD = MS_PREFIX + "Forward "  # the forward lobe's inputs, named as an hg layer's (``_layer_terms``)
 
 
 def _ms_sockets(p: model.Params) -> list[Socket]:
-    """Baked by Lamina (addon/bake): the extra lobe's layer parameters (W1 folded into the albedo) and the
-    Lambert weights. Every one can be driven by a baked texture."""
+    """Baked by Lamina (addon/bake): the extra lobe's layer parameters (W1 folded into the albedo), the Lambert
+    weights (reflection only over a substrate) and the forward lobe. Every one can be driven by a baked texture."""
     out = []
     for k, layer in enumerate(p.layers):
         for prm in _layer_params(layer):
             baked = replace(prm, max=None if prm.name == "albedo" else prm.max, texturable=True,
                             description="Baked multiple-scattering lobe: " + prm.description)
             out.append(Socket(f"{MS_PREFIX}L{k + 1} {_label(layer, prm)}", prm.kind, baked, k, MS_PANEL, True))
-    weights = MS_WEIGHTS if p.substrate is None else MS_WEIGHTS[:1]
+    weights = [prm for prm in MS_WEIGHTS if p.substrate is None or prm.name != "transmission"]
     out += [Socket(MS_PREFIX + prm.label, prm.kind, prm, None, MS_PANEL, True) for prm in weights]
     return out + [Socket(MS_PREFIX + prm.label, prm.kind, prm, None, MS_PANEL, True) for prm in MS_ENERGY]
 
@@ -322,7 +330,9 @@ def _lobe_values(p: model.Params) -> dict:
     from ..bake.spongecake import predict
 
     pred = predict(p)
-    weights = {"reflection": pred.reflection, "transmission": pred.transmission}
+    forward = pred.forward.layers[0]
+    weights = {"reflection": pred.reflection, "transmission": pred.transmission, "forward_g": forward.roughness,
+               "forward_albedo": forward.albedo, "forward_thickness": forward.thickness}
     values = {}
     for s in _ms_sockets(p):
         if s.param in MS_ENERGY:
@@ -432,10 +442,12 @@ def shade(b, p: model.Params) -> None:
         _multiple_scattering(multiple, p)
 
 
-def _layers(b, p: model.Params, mu, prefix: str, along_normal: bool = False) -> list[dict]:
-    """Each layer's closures (inputs named ``prefix + "L<k> ..."``); returns the per-layer terms. ``along_normal``:
-    the closures' weights for the view along the normal (``_layer_terms``), whatever the view."""
-    terms = [_layer_terms(b, prefix + f"L{k + 1} ", layer, mu, along_normal) for k, layer in enumerate(p.layers)]
+def _layers(b, p: model.Params, mu, prefix: str, along_normal: bool = False, names=None) -> list[dict]:
+    """Each layer's closures (inputs named ``prefix + "L<k> ..."``, or ``names[k] + "..."``); returns the per-layer
+    terms. ``along_normal``: the closures' weights for the view along the normal (``_layer_terms``), whatever the
+    view."""
+    names = names or [prefix + f"L{k + 1} " for k in range(len(p.layers))]
+    terms = [_layer_terms(b, name, layer, mu, along_normal) for name, layer in zip(names, p.layers)]
     taus = [t["tau"] for t in terms]
     for k, (layer, t) in enumerate(zip(p.layers, terms)):
         above = _prod(*taus[:k]) if k else None
@@ -461,8 +473,12 @@ def _multiple_scattering(b, p: model.Params) -> None:
     plus the Lambert lobes W2r / π and W2t / π (exact). ``shade`` passes a backend that scales these closures by
     the per-view energy scale (``_EnergyScaled``, the budget less 1), which restores the lobe's energy at each view: the weights'
     split between the closures is that of normal incidence. Computed from the inputs alone, these weights are
-    constants that Cycles folds when the inputs are baked values. [approx: ms-weights-at-normal]"""
+    constants that Cycles folds when the inputs are baked values. [approx: ms-weights-at-normal]
+    The forward lobe is mapped as an hg layer: its Lambert closures add to the Lambert lobes' (no closure more).
+    [approx: lambert-hg]"""
     _layers(b, p, 1.0, MS_PREFIX, along_normal=True)
+    forward = model.Layer("hg", 0.0, (0.0, 0.0, 0.0), 1.0, (1.0, 1.0, 1.0), (0.0, 0.0, 1.0))  # its structure only
+    _layers(b, replace(p, layers=(forward,)), 1.0, "", along_normal=True, names=[MS_FORWARD])
     b.diffuse(b.input(MS_PREFIX + "Reflection", "color"))
     if p.substrate is None:
         b.translucent(b.input(MS_PREFIX + "Transmission", "color"))

@@ -15,7 +15,7 @@ Conventions (local frame, z = macro normal; ``wi`` points to the light, ``wo`` t
   (transmitted throughput integrates to 1 - F; f(i, o) / eta_o^2 = f(o, i) / eta_i^2).
 * Delta transmission is a Dirac along -wi with weight prod_k tau_k(wi), only when the flag is on and there is
   no substrate (every substrate blocks or refracts it); it is not part of ``eval`` or ``pdf``.
-* With ``multiple_scattering``, ``eval`` adds the network's two lobes (Sec. 5) and ``sample``/``pdf`` still
+* With ``multiple_scattering``, ``eval`` adds the network's lobes (Sec. 5, and a forward lobe of ours) and ``sample``/``pdf`` still
   sample single scattering only, as the paper does (Sec. 4.5); the sample weight uses the full f.
 * Energy (``energy_tables``; not in the paper): the network's lobes are scaled per view by
   s(ωo) = min((left(ωo) − m) / E(ωo), limit), tabulated on ``ENERGY_KNOTS`` view cosines and, where a layer is
@@ -231,7 +231,8 @@ def _network_lobes(params: Params, pred, wi, wo):
     """The network's multiple-scattering lobes as predicted, before the energy scale (``eval_multiple``)."""
     up = (wo[:, 2] > 0)[:, None]  # the viewer's side picks the prediction (module docstring)
     same = (wi[:, 2] > 0) == (wo[:, 2] > 0)
-    f = np.where(up, eval(pred.lobe, wi, wo), eval(pred.lobe_below, wi, wo))
+    f = np.where(up, eval(pred.lobe, wi, wo) + eval(pred.forward, wi, wo),
+                 eval(pred.lobe_below, wi, wo) + eval(pred.forward_below, wi, wo))
     w2r = np.where(up, pred.reflection, pred.reflection_below)
     w2t = np.where(up, pred.transmission, pred.transmission_below)
     f = f + np.where(same[:, None], w2r, w2t) / np.pi
@@ -311,11 +312,12 @@ def _left(params: Params, wo):
 
 def network_albedo(params: Params, pred, wo):
     """Directional albedo (N, 3) of the network's unscaled lobes ``pred`` (``bake.spongecake.predict``) towards wo
-    (all on one side): the extra single-scattering lobe's plus W2r + W2t (Lambert, exact); over a substrate
-    reflection only."""
+    (all on one side): the extra single-scattering lobe's and the forward lobe's plus W2r + W2t (Lambert, exact);
+    over a substrate reflection only."""
     up = wo[0, 2] > 0
-    lobe = pred.lobe if up else pred.lobe_below
-    reflection, transmission = directional_albedo(lobe, wo, n=ENERGY_SAMPLES, split=True)
+    reflection, transmission = (
+        sum(parts) for parts in zip(*(directional_albedo(lobe, wo, n=ENERGY_SAMPLES, split=True) for lobe in
+                                      ((pred.lobe, pred.forward) if up else (pred.lobe_below, pred.forward_below)))))
     w2r = np.asarray(pred.reflection if up else pred.reflection_below)
     w2t = np.asarray(pred.transmission if up else pred.transmission_below)
     if params.substrate is not None:

@@ -255,8 +255,9 @@ def test_training_augmentations_are_exact_symmetries_of_the_model():
 
 @pytest.mark.parametrize("n_layers", [1, 2])
 def test_a_zero_network_output_keeps_the_layer_parameters(n_layers):
+    """... and a network without the forward lobe's outputs predicts none (albedo 0)."""
     rows = _rows(n_layers, 16)
-    raw = np.zeros((16, n_layers * ms.OUTPUTS + ms.WEIGHT_OUTPUTS))
+    raw = np.zeros((16, train.outputs(n_layers)))
     lobes, weights = ms.decode(raw, rows)
     for k in range(n_layers):
         kind = rows[:, k, layer_rows.TYPE]
@@ -266,23 +267,45 @@ def test_a_zero_network_output_keeps_the_layer_parameters(n_layers):
         np.testing.assert_allclose(lobes[:, k, layer_rows.THICKNESS], rows[:, k, layer_rows.THICKNESS], rtol=1e-6)
         np.testing.assert_allclose(lobes[:, k, layer_rows.ALBEDO] / np.log(2.0),
                                    np.clip(rows[:, k, layer_rows.ALBEDO], 1e-4, 1 - 1e-4), rtol=1e-6)
-    np.testing.assert_allclose(weights, np.log(2.0))
+    np.testing.assert_allclose(weights[:, ms.W2R], np.log(2.0))
+    np.testing.assert_allclose(weights[:, ms.W2T], np.log(2.0))
+    np.testing.assert_allclose(weights[:, ms.FORWARD_G], 0.0)
+    np.testing.assert_allclose(weights[:, ms.FORWARD_ALBEDO], np.log(2.0))
+    np.testing.assert_allclose(weights[:, ms.FORWARD_THICKNESS], 1.0)
+    without = ms.decode(raw[:, :-ms.FORWARD_OUTPUTS], rows)[1]
+    np.testing.assert_allclose(without[:, :ms.FORWARD_G], weights[:, :ms.FORWARD_G])
+    np.testing.assert_allclose(without[:, ms.FORWARD_ALBEDO], 0.0)
 
 
-@pytest.mark.parametrize("halves", [False, True])
-def test_the_lobe_bound_fits_each_held_out_configuration_closer_than_the_network(halves):
+@pytest.mark.parametrize("form", ["lobe", "halves", "forward"])
+def test_the_lobe_bound_fits_each_held_out_configuration_closer_than_the_network(form):
     """``training.lobe_bound`` optimises the lobe form per configuration from the network's prediction: on a few
-    held-out stacks it ends below the network's error (a bound that did not move would say nothing), and the halves
-    form describes the same single scattering as the layer it cuts."""
+    held-out stacks it ends below the network's error (a bound that did not move would say nothing), the halves
+    form describes the same single scattering as the layer it cuts, and the forward lobe is an HG layer's single
+    scattering in the reference."""
     from training import lobe_bound
 
     data = {k: v[:3] for k, v in validation.load_shards(VALIDATION, 1).items() if k != "meta"}
-    form = lobe_bound.halved(data) if halves else data
-    if halves:
-        wi, wo = data["wi"][0].astype(float), data["wo"][0].astype(float)
-        pairs = np.repeat(wi, len(wo), axis=0), np.tile(wo, (len(wi), 1))
-        one, two = (ref.eval(layer_rows.params_from_rows(rows[0]), *pairs) for rows in (data["rows"], form["rows"]))
+    halves = lobe_bound.halved(data) if form == "halves" else data
+    wi, wo = data["wi"][0].astype(float), data["wo"][0].astype(float)
+    pairs = np.repeat(wi, len(wo), axis=0), np.tile(wo, (len(wi), 1))
+    if form == "halves":
+        one, two = (ref.eval(layer_rows.params_from_rows(rows[0]), *pairs) for rows in (data["rows"], halves["rows"]))
         np.testing.assert_allclose(two, one, rtol=1e-9, atol=1e-12)
-    network = validation.lobe_errors(data, validation.predicted_lobes(form, energy=False))
-    bound = validation.lobe_errors(data, lobe_bound.best_lobes(form, steps=60, rate=0.02))
+    if form == "forward":  # the forward lobe is one hg layer's single scattering, as decoded
+        raw = np.zeros((1, train.outputs(1)))
+        raw[0, -ms.FORWARD_OUTPUTS:] = (0.7, 0.3, -1.0, 2.0, -0.4)
+        lobe = train.predicted_lobe(lambda x: torch.as_tensor(raw), torch.as_tensor(data["rows"][:1]),
+                                    *(torch.as_tensor(w[None]) for w in (wi, wo)))[0].numpy()
+        lobe0 = train.predicted_lobe(lambda x: torch.as_tensor(raw[:, :-ms.FORWARD_OUTPUTS]),
+                                     torch.as_tensor(data["rows"][:1]),
+                                     *(torch.as_tensor(w[None]) for w in (wi, wo)))[0].numpy()
+        weights = ms.decode(raw, data["rows"][:1].astype(float))[1][0]
+        np.testing.assert_allclose(weights[ms.FORWARD_G], 0.98 * np.tanh(0.7))
+        np.testing.assert_allclose(weights[ms.FORWARD_ALBEDO], np.log1p(np.exp([0.3, -1.0, 2.0])))
+        expected = ref.eval(ms.forward_params(weights), *pairs) * np.abs(pairs[1][:, 2:])
+        np.testing.assert_allclose((lobe - lobe0).reshape(-1, 3), expected, rtol=1e-9, atol=1e-12)
+    network = validation.lobe_errors(data, validation.predicted_lobes(halves, energy=False))
+    bound = validation.lobe_errors(data, lobe_bound.best_lobes(halves, steps=60, rate=0.02,
+                                                               forward=form == "forward"))
     assert bound["mean_relative_lobe_error"] < network["mean_relative_lobe_error"] - 0.02
