@@ -22,8 +22,8 @@ EXR layout (RGBA float32, Non-Color, alpha channel-packed: RGB and A are indepen
 inputs' H x W; unused channels hold 0, an unused A holds 1). ``map_layout`` derives it from the shader's baked
 ``MS`` sockets (``nodes.spongecake.sockets``): per layer in declaration order, the i-th colour/vector socket
 fills RGB and the i-th float socket A of one map; floats left over fill R, G, B, A of further maps; then the
-same for the Lambert weights. A map is named after its sockets. With the current declarations (``k`` the
-1-based layer number; RGB weights W2r, W2t):
+same for the weights (the Lambert weights and the forward lobe). A map is named after its sockets. With the current
+declarations (``k`` the 1-based layer number; RGB weights W2r, W2t):
 
 ==================================  ==========================================  ================================
 map                                 RGB                                         A
@@ -34,8 +34,14 @@ map                                 RGB                                         
 ``MS Lk Orientation Thickness``     MS Lk Orientation (flakes, no Fresnel)      MS Lk Thickness
 ``MS Lk Albedo Mean Cosine g``      MS Lk Albedo (hg layers)                    MS Lk Mean Cosine g
 ``MS Lk Thickness`` (hg layers)     R = MS Lk Thickness, G = B = 0              1 (unused)
-``MS Reflection``                   W2r                                         1 (unused)
-``MS Transmission`` (no substrate)  W2t                                         1 (unused)
+``MS Reflection Forward Mean         W2r                                         MS Forward Mean Cosine g
+Cosine g``
+``MS Transmission Forward           W2t                                         MS Forward Thickness
+Thickness`` (no substrate)
+``MS Forward Albedo`` (no           the forward lobe's albedo                   1 (unused)
+substrate)
+``MS Forward Albedo Forward         the forward lobe's albedo (over a           MS Forward Thickness
+Thickness`` (over a substrate)      substrate)
 ==================================  ==========================================  ================================
 
 Orientations are unit tangent-space xyz stored raw (components may be negative), as the shader reads them.
