@@ -73,10 +73,11 @@ def main(argv=None) -> int:
     ap.add_argument("--energy", type=float, default=0.0, help="weight of the energy error in the loss")
     ap.add_argument("--halves", action="store_true",
                     help="one layer only: the two-layer form on the layer cut in two halves (--validation's 1 layer)")
+    ap.add_argument("--layers", type=int, nargs="+", default=[1, 2], choices=[1, 2])
     ap.add_argument("--forward", action="store_true", help="with the forward lobe (an HG layer's single scattering; without it the paper's form)")
     a = ap.parse_args(argv)
     torch.set_num_threads(1)
-    for n_layers in (1,) if a.halves else range(1, ms.NETWORK_LAYERS + 1):
+    for n_layers in (1,) if a.halves else a.layers:
         data = validation.load_shards(a.validation, n_layers)
         form = halved(data) if a.halves else data
         for label, predicted in (("network", validation.predicted_lobes(form, energy=False)),

@@ -280,7 +280,7 @@ def test_a_zero_network_output_keeps_the_layer_parameters(n_layers):
 @pytest.mark.parametrize("form", ["lobe", "halves", "forward"])
 def test_the_lobe_bound_fits_each_held_out_configuration_closer_than_the_network(form):
     """``training.lobe_bound`` optimises the lobe form per configuration from the network's prediction: on a few
-    held-out stacks it ends below the network's error (a bound that did not move would say nothing), the halves
+    held-out stacks it ends below the error it starts from (a bound that did not move would say nothing), the halves
     form describes the same single scattering as the layer it cuts, and the forward lobe is an HG layer's single
     scattering in the reference."""
     from training import lobe_bound
@@ -305,7 +305,7 @@ def test_the_lobe_bound_fits_each_held_out_configuration_closer_than_the_network
         np.testing.assert_allclose(weights[ms.FORWARD_ALBEDO], np.log1p(np.exp([0.3, -1.0, 2.0])))
         expected = ref.eval(ms.forward_params(weights), *pairs) * np.abs(pairs[1][:, 2:])
         np.testing.assert_allclose((lobe - lobe0).reshape(-1, 3), expected, rtol=1e-9, atol=1e-12)
-    network = validation.lobe_errors(data, validation.predicted_lobes(halves, energy=False))
-    bound = validation.lobe_errors(data, lobe_bound.best_lobes(halves, steps=60, rate=0.02,
-                                                               forward=form == "forward"))
-    assert bound["mean_relative_lobe_error"] < network["mean_relative_lobe_error"] - 0.02
+    start, bound = (validation.lobe_errors(data, lobe_bound.best_lobes(halves, steps=steps, rate=0.02,
+                                                                       forward=form == "forward"))
+                    for steps in (0, 60))
+    assert bound["mean_relative_lobe_error"] < start["mean_relative_lobe_error"] - 0.02
