@@ -1,5 +1,6 @@
 """How close the lobe form can come to the Monte Carlo data at all: W1 f_ss(params') + W2 / pi (the paper's) or
-that plus the forward lobe f_ss(forward) (``--forward``; ``addon.bake.spongecake``), with every output optimised for each held-out configuration on its own (no network), starting from the shipped network's
+that plus the forward lobe f_ss(forward) (``--forward``; ``addon.bake.spongecake``), with every output optimised
+for each held-out configuration on its own (no network), starting from the shipped network's
 prediction. The gap between this bound and the network is what more data and training can win; what is left at the
 bound is the lobe form's own (issue 15's goal of 25% mean lobe error is measured against it in docs/training.md).
 
@@ -39,14 +40,11 @@ def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward
         start = np.concatenate([start, np.tile(train.FORWARD_START, (len(start), 1))], axis=1)
     raw = torch.tensor(start if forward else start[:, :kept], dtype=torch.float64, requires_grad=True)
 
-    def predicted_lobes():
-        return train.predicted_lobe(lambda x: raw, rows, wi, wo)
-
     opt = torch.optim.Adam([raw], lr=rate)
     for step in range(steps):
         for group in opt.param_groups:
             group["lr"] = rate * 0.5 * (1.0 + math.cos(math.pi * step / steps)) + 1e-5
-        predicted = predicted_lobes()
+        predicted = train.predicted_lobe(lambda x: raw, rows, wi, wo)
         lobe = (predicted - truth).abs().sum(dim=(1, 2, 3)) / total
         gained = (predicted.sum(dim=(1, 2, 3)) - truth.sum(dim=(1, 2, 3))).abs() / total
         loss = (lobe + energy * gained).sum()
@@ -54,7 +52,7 @@ def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward
         loss.backward()
         opt.step()
     with torch.no_grad():
-        return predicted_lobes().cpu().numpy()
+        return train.predicted_lobe(lambda x: raw, rows, wi, wo).cpu().numpy()
 
 
 def halved(data: dict) -> dict:
@@ -74,7 +72,8 @@ def main(argv=None) -> int:
     ap.add_argument("--halves", action="store_true",
                     help="one layer only: the two-layer form on the layer cut in two halves (--validation's 1 layer)")
     ap.add_argument("--layers", type=int, nargs="+", default=[1, 2], choices=[1, 2])
-    ap.add_argument("--forward", action="store_true", help="with the forward lobe (an HG layer's single scattering; without it the paper's form)")
+    ap.add_argument("--forward", action="store_true",
+                    help="with the forward lobe (an HG layer's single scattering; without it the paper's form)")
     a = ap.parse_args(argv)
     torch.set_num_threads(1)
     for n_layers in (1,) if a.halves else a.layers:
@@ -83,7 +82,8 @@ def main(argv=None) -> int:
         for label, predicted in (("network", validation.predicted_lobes(form, energy=False)),
                                  ("bound", best_lobes(form, a.steps, a.rate, a.energy, a.forward))):
             scores = validation.lobe_errors(data, predicted)
-            print(json.dumps({"layers": n_layers, "halves": a.halves, "forward": a.forward, "lobes": label, "steps": a.steps,
+            print(json.dumps({"layers": n_layers, "halves": a.halves, "forward": a.forward, "lobes": label,
+                              "steps": a.steps,
                               "energy_weight": a.energy,
                               **{k: v for k, v in scores.items() if k != "per_config"}}), flush=True)
     return 0

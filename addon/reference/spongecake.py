@@ -15,8 +15,9 @@ Conventions (local frame, z = macro normal; ``wi`` points to the light, ``wo`` t
   (transmitted throughput integrates to 1 - F; f(i, o) / eta_o^2 = f(o, i) / eta_i^2).
 * Delta transmission is a Dirac along -wi with weight prod_k tau_k(wi), only when the flag is on and there is
   no substrate (every substrate blocks or refracts it); it is not part of ``eval`` or ``pdf``.
-* With ``multiple_scattering``, ``eval`` adds the network's lobes (Sec. 5, and a forward lobe of ours) and ``sample``/``pdf`` still
-  sample single scattering only, as the paper does (Sec. 4.5); the sample weight uses the full f.
+* With ``multiple_scattering``, ``eval`` adds the network's lobes (Sec. 5, and a forward lobe of ours) and
+  ``sample``/``pdf`` still sample single scattering only, as the paper does (Sec. 4.5); the sample weight uses the
+  full f.
 * Energy (``energy_tables``; not in the paper): the network's lobes are scaled per view by
   s(ωo) = min((left(ωo) − m) / E(ωo), limit), tabulated on ``ENERGY_KNOTS`` view cosines and, where a layer is
   oriented off the normal, ``ENERGY_AZIMUTHS`` view azimuths, interpolated bilinearly in √|μo| and the azimuth
