@@ -91,6 +91,23 @@ def make_network(n_layers: int) -> torch.nn.Sequential:
     return torch.nn.Sequential(*modules).double().to(DEVICE)
 
 
+def warm_start(net: torch.nn.Sequential, shipped: mlp.MLP) -> None:
+    """Load an exported network's weights into ``net`` (training goes on from it). A network exported before the
+    forward lobe has FORWARD_OUTPUTS fewer outputs: those start as ``make_network`` starts them, so the warm-started
+    network predicts what ``shipped`` predicts, plus a faint forward lobe (albedo about 0.007)."""
+    linears = [m for m in net if isinstance(m, torch.nn.Linear)]
+    sizes = [(m.weight.shape[1], m.weight.shape[0]) for m in linears]
+    shipped_sizes = [w.shape for w in shipped.weights]
+    without_forward = sizes[:-1] + [(sizes[-1][0], sizes[-1][1] - ms.FORWARD_OUTPUTS)]
+    if shipped_sizes not in (sizes, without_forward):
+        raise ValueError(f"the warm-start network's layers {shipped_sizes} are neither this network's {sizes} nor "
+                         f"those without the forward lobe")
+    with torch.no_grad():
+        for m, w, b in zip(linears, shipped.weights, shipped.biases):
+            m.weight[:w.shape[1]] = torch.as_tensor(w.T)
+            m.bias[:b.shape[0]] = torch.as_tensor(b)
+
+
 def to_mlp(net: torch.nn.Sequential, manifest: dict) -> mlp.MLP:
     linears = [m for m in net if isinstance(m, torch.nn.Linear)]
     return mlp.MLP(tuple(m.weight.detach().cpu().numpy().T.copy() for m in linears),
@@ -183,15 +200,19 @@ def lobe_errors(net, data: dict) -> dict:
 
 # ------------------------------------------------------------------------------------------- training
 
-def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int = 32, log=print):
-    """Train for ``minutes``; returns the network at its best split-validation loss (checked every few seconds)
-    and what happened."""
+def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int = 32, init: mlp.MLP | None = None,
+          log=print):
+    """Train for ``minutes``, from ``make_network``'s start or, with ``init``, from an exported network
+    (``warm_start``); returns the network at its best split-validation loss (checked every few seconds) and what
+    happened."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     order = rng.permutation(len(data["rows"]))
     n_val = max(1, len(order) // 10)
     val, train_idx = order[:n_val], order[n_val:]
     net = make_network(n_layers)
+    if init is not None:
+        warm_start(net, init)
     opt = torch.optim.AdamW(net.parameters(), lr=LEARNING_RATE, weight_decay=WEIGHT_DECAY)
     start, step, epoch, last_check, last_log = time.time(), 0, 0, -math.inf, -math.inf
     best = (math.inf, None, 0)
@@ -269,6 +290,8 @@ def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path
         "training_seconds": info["seconds"], "split_validation": split, "dataset_noise": dataset.noise(data),
         "date": datetime.date.today().isoformat(), "code_version": code_version(),
     }
+    if info.get("init"):
+        manifest["warm_started_from"] = info["init"]
     path = Path(out) / ms.weights_path(n_layers).name
     exported = to_mlp(net, manifest)
     mlp.save(path, exported.weights, exported.biases, manifest)
@@ -291,6 +314,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--device", default="cpu", help="torch device to train on (cuda where a GPU is lent)")
     ap.add_argument("--batch", type=int, default=32, help="configurations per mini-batch")
+    ap.add_argument("--init", type=Path, help="folder of exported weights to go on training from (warm start; a "
+                    "network without the forward lobe gets its outputs added), recorded in the manifest")
     ap.add_argument("--quick", action="store_true", help="a few seconds of training (tests)")
     ap.add_argument("--rescore", action="store_true",
                     help="only re-score the weights in --out on --validation and record it in their manifests")
@@ -317,7 +342,11 @@ def main(argv=None) -> int:
         minutes = 0.05 if a.quick else a.minutes
         print(f"training the {n_layers}-layer network on {len(data['rows'])} configurations for {minutes} min",
               flush=True)
-        net, info = train(data, n_layers, minutes, seed=a.seed, batch=4 if a.quick else a.batch)
+        init = mlp.load(Path(a.init) / ms.weights_path(n_layers).name) if a.init else None
+        net, info = train(data, n_layers, minutes, seed=a.seed, batch=4 if a.quick else a.batch, init=init)
+        if init is not None:
+            info["init"] = {k: init.manifest.get(k) for k in ("training_configs", "steps", "training_seconds", "date",
+                                                               "code_version", "held_out_validation", "outputs")}
         export(net, info, data, n_layers, a.out, a.validation)
     return 0
 

@@ -108,6 +108,11 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
             np.random.default_rng(1), 32)
         f = ref.eval(p, wi, wo) - ref.eval(ref.params_from_dict({"layers": [{"albedo": [0.9] * 3}] * n_layers}), wi, wo)
         assert np.all(np.isfinite(f)) and np.all(f >= 0) and f.max() > 0
+    again = tmp_path / "again"
+    assert train.main(["--quick", "--data", str(data_dir), "--out", str(again), "--validation", str(data_dir),
+                       "--threads", "1", "--layers", "1", "--init", str(weights)]) == 0
+    first = mlp.load(weights / ms.weights_path(1).name).manifest
+    assert mlp.load(again / ms.weights_path(1).name).manifest["warm_started_from"]["steps"] == first["steps"]
     mlp.load.cache_clear()
     ms.predict.cache_clear()
 
@@ -275,6 +280,27 @@ def test_a_zero_network_output_keeps_the_layer_parameters(n_layers):
     without = ms.decode(raw[:, :-ms.FORWARD_OUTPUTS], rows)[1]
     np.testing.assert_allclose(without[:, :ms.FORWARD_G], weights[:, :ms.FORWARD_G])
     np.testing.assert_allclose(without[:, ms.FORWARD_ALBEDO], 0.0)
+
+
+@pytest.mark.parametrize("n_layers", [1, 2])
+def test_a_warm_start_goes_on_from_the_exported_network(n_layers):
+    """Training from ``--init`` starts where the exported network is; one exported before the forward lobe gets its
+    outputs added (faint), every other output unchanged."""
+    rows = _rows(n_layers, 16)
+    x = ms.features(rows)
+    exported = train.to_mlp(_random_network(n_layers, seed=5), {})
+    if n_layers == 2:  # as exported before the forward lobe
+        exported = mlp.MLP(exported.weights[:-1] + (exported.weights[-1][:, :-ms.FORWARD_OUTPUTS],),
+                           exported.biases[:-1] + (exported.biases[-1][:-ms.FORWARD_OUTPUTS],), {})
+    net = train.make_network(n_layers)
+    train.warm_start(net, exported)
+    with torch.no_grad():
+        raw = net(torch.as_tensor(x)).numpy()
+    np.testing.assert_allclose(raw[:, :exported.weights[-1].shape[1]], exported(x), rtol=1e-9, atol=1e-12)
+    if n_layers == 2:
+        assert (ms.decode(raw, rows)[1][:, ms.FORWARD_ALBEDO] < 0.02).all()
+    with pytest.raises(ValueError, match="neither"):
+        train.warm_start(train.make_network(n_layers), train.to_mlp(train.make_network(3 - n_layers), {}))
 
 
 @pytest.mark.parametrize("form", ["lobe", "halves", "forward"])
