@@ -169,6 +169,28 @@ def translucent(wi, wo):
     return np.repeat(np.where(opposite, 1.0 / np.pi, 0.0)[:, None], 3, axis=1)
 
 
+def velvet(wi, wo, sigma):
+    """Cycles' Ashikhmin velvet (Sheen BSDF node, distribution Ashikhmin; OSL ``ashikhmin_velvet``) around z, as a
+    BSDF: D G / (4 cos θi cos θo) with the inverted-Gaussian D = e^{−cot²θh / σ²} / (π σ² sin⁴θh) (Ashikhmin et al.
+    2000) and G = min(1, 2 cos θh cos θi / (ωi·h), 2 cos θh cos θo / (ωi·h)) (kernel
+    closure/bsdf_ashikhmin_velvet.h, the same in 4.2 and 5.0), σ clamped to at least 0.01 at closure setup; zero
+    where h is within 1e-5 of the normal in cosine. Not energy-normalised: its albedo rises past 1 at grazing
+    views for large σ."""
+    n = len(wi)
+    s2 = np.maximum(np.broadcast_to(np.asarray(sigma, dtype=float), (n,)), 0.01) ** 2
+    ok = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    ci, co = np.where(ok, wi[:, 2], 1.0), np.where(ok, wo[:, 2], 1.0)
+    h = _normalize(wi + wo)
+    ch, hi = h[:, 2], np.abs(_dot(wi, h))
+    ok &= (np.abs(ch) < 1.0 - 1e-5) & (hi > 1e-5)
+    sin2 = np.where(ok, 1.0 - ch * ch, 1.0)
+    ratio = np.maximum(ch / np.where(ok, hi, 1.0), 1e-5)
+    d = np.exp(-(ch * ch / sin2) / s2) / (np.pi * s2 * sin2 * sin2)
+    g = np.minimum(1.0, np.minimum(2.0 * ratio * ci, 2.0 * ratio * co))
+    f = np.where(ok, d * g / (4.0 * ci * co), 0.0)
+    return np.repeat(f[:, None], 3, axis=1)
+
+
 def transparent(wi, wo):
     return np.zeros((len(wi), 3))
 
@@ -457,6 +479,7 @@ EVAL = {
     "diffuse": diffuse,
     "translucent": translucent,
     "transparent": transparent,
+    "velvet": velvet,
     "conductor": conductor,
     "dielectric": dielectric,
     "beckmann": beckmann_reflection,

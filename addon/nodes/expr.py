@@ -192,6 +192,10 @@ class NumpyBackend(NumpyMath):
         """Beckmann refraction without Fresnel around ``normal`` (a direction) into a medium of relative ``ior``."""
         self._add("beckmann_refraction", color, alpha=alpha, ior=ior, normal=normal)
 
+    def velvet(self, color, sigma):
+        """Cycles' Ashikhmin velvet around the shading normal (``closures_np.velvet``)."""
+        self._add("velvet", color, sigma=sigma)
+
     def bulk(self, weight):
         """The shader plugged into the ``Bulk`` input, scaled by ``weight``."""
         for kind, color, kw in self._bulk(self.wo).closures:
@@ -525,6 +529,9 @@ class OslBackend:
     def beckmann_refraction(self, color, alpha, ior, normal):
         a = _osl(alpha).code
         self._closure(color, f'microfacet("beckmann", {normal.code}, Tn, {a}, {a}, {_osl(ior).code}, 1)')
+
+    def velvet(self, color, sigma):
+        self._closure(color, f"ashikhmin_velvet(N, {_osl(sigma).code})")
 
     def source(self, shader_name: str, header: str) -> str:
         params = ",\n    ".join(f"{_osl_type(kind)} {osl_identifier(name)} = {_osl_default(kind, d)}"

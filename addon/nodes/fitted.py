@@ -4,8 +4,8 @@ to the reference BSDF (issue 14; bpy-free).
 What a mapping's ``shade`` renders is a sum of closures whose weights depend on the view only. The fitted mapping
 keeps those closures (their shapes: narrow peaks, tilted normals, anisotropy) and multiplies each closure's colour
 by an RGB table over the view cosine; it may add up to ``MAX_EXTRAS`` closures from a small dictionary (Lambert,
-translucency, GGX around the normal, Beckmann refraction around the view), each with an RGB weight table, beside
-the material's closures or in place of one of them: the fitted mapping renders at most as many closures as the
+translucency, GGX around the normal, Beckmann refraction around the view, Ashikhmin velvet for light between
+grazing directions), each with an RGB weight table, beside the material's closures or in place of one of them: the fitted mapping renders at most as many closures as the
 analytic one (its render cost). Per tabulated view cosine the weights minimise the cosine-weighted error against
 the reference over (ωi, ωo) (non-negative least squares), with the reference's own directional albedo matched (a
 heavily weighted row). The forward model is ``closures_np``: the fit optimises what Cycles renders. Tables are
@@ -72,6 +72,7 @@ def extra_dictionary() -> list[tuple[str, dict]]:
     out += [("ggx", {"alpha": a, "normal": up}) for a in (0.1, 0.15, 0.2, 0.3, 0.45, 0.6, 0.8, 1.0)]
     out += [("beckmann_refraction", {"alpha": a, "ior": 10.0, "normal": "view"})
             for a in (0.1, 0.2, 0.3, 0.5, 0.7, 1.0)]
+    out += [("velvet", {"sigma": s}) for s in (0.2, 0.3, 0.5)]  # wider ones rob the sun-lit views (leaf)
     return out
 
 
@@ -593,5 +594,7 @@ def shade(b, mapping, p, fit: Fit) -> None:
             b.glossy(color, kw["alpha"], kw["alpha"], b.normal())
         elif kind == "beckmann_refraction":
             b.beckmann_refraction(color, kw["alpha"], kw["ior"], b.view() if kw["normal"] == "view" else b.normal())
+        elif kind == "velvet":
+            b.velvet(color, kw["sigma"])
         else:
             getattr(b, kind)(color)

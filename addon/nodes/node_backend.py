@@ -484,6 +484,10 @@ class NodeBackend:
         self._closure("ShaderNodeBsdfRefraction", {"Color": color, "Roughness": self._roughness(alpha), "IOR": ior,
                                                    "Normal": normal}, distribution="BECKMANN")
 
+    def velvet(self, color, sigma):
+        """Sheen BSDF, Ashikhmin distribution (its Roughness is the velvet's σ)."""
+        self._closure("ShaderNodeBsdfSheen", {"Color": color, "Roughness": sigma}, distribution="ASHIKHMIN")
+
     def dielectric(self, color, alpha, ior):
         self._closure("ShaderNodeBsdfGlass", {"Color": color, "Roughness": self._roughness(alpha), "IOR": ior},
                       distribution="GGX")
