@@ -6,7 +6,8 @@ keeps those closures (their shapes: narrow peaks, tilted normals, anisotropy) an
 by an RGB table over the view cosine; it may add up to ``MAX_EXTRAS`` closures from a small dictionary (Lambert,
 translucency, GGX around the normal, Beckmann refraction around the view, Ashikhmin velvet for light between
 grazing directions), each with an RGB weight table, beside the material's closures or in place of one of them: the
-fitted mapping renders at most as many closures as the analytic one (its render cost). Per tabulated view cosine the weights minimise the cosine-weighted error against
+fitted mapping renders at most as many closures as the analytic one (its render cost). Per tabulated view cosine
+the weights minimise the cosine-weighted error against
 the reference over (ωi, ωo) (non-negative least squares), with the reference's own directional albedo matched (a
 heavily weighted row). The forward model is ``closures_np``: the fit optimises what Cycles renders. Tables are
 piecewise linear in √cos θo on ``KNOTS`` uniform knots (``view_cosines``; a Color Ramp in node groups, a constant
