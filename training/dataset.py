@@ -15,6 +15,7 @@ two independent halves, which gives its Monte Carlo noise for free: the standard
     python -m training.dataset --layers 1 2 --configs 2000 4000            # the documented default (about an hour)
     python -m training.dataset --quick --out /tmp/lamina-quick             # seconds, for tests
     python -m training.dataset --throughput                                # paths per second (one process)
+    python -m training.dataset --pack /tmp/ms-pack.npz                     # one compact file to train elsewhere
 
 Shard arrays: ``rows`` (C, L, 12) layer rows, ``wi`` (C, n_wi, 3), ``wo`` (C, n_wo, 3), ``ms`` (C, n_wi, n_wo, 3)
 the order >= 2 estimate of f (no cosine), ``ms_half_diff`` the same for a - b, ``ss`` the walk's order 1.
@@ -59,6 +60,7 @@ class Size:
 
 
 QUICK = Size(configs=8, shard=4, n_wi=4, n_wo=32, paths=200)
+PACK_MANTISSA_BITS = 6  # float16 keeps 10; 6 (0.8% at most) makes the default dataset's pack about 45 MB
 
 
 # ------------------------------------------------------------------------------------------ parameters
@@ -171,13 +173,57 @@ def make_shard(job) -> str:
 
 
 def load(out: Path, n_layers: int) -> dict:
-    """All shards of one layer count concatenated (arrays as in the module docstring, plus ``meta``)."""
-    return load_shards(out, n_layers)
+    """All shards of one layer count concatenated (arrays as in the module docstring, plus ``meta``), from the
+    shard folder or from a ``pack`` file (which has no ``ms_half_diff`` and ``ss``, and brings its ``noise``)."""
+    return unpack(out, n_layers) if Path(out).is_file() else load_shards(out, n_layers)
+
+
+def pack(folder: Path, path: Path, layer_counts, mantissa_bits: int = PACK_MANTISSA_BITS) -> dict:
+    """One compressed file of what training reads, small enough to carry to another machine (a lent GPU): per layer
+    count ``rows``, ``wi``, ``wo`` (float32) and ``ms`` as float16 relative to each configuration's largest value,
+    rounded to ``mantissa_bits`` bits (relative error at most 2^-(bits + 1), far below a pair's Monte Carlo noise),
+    with the shards' ``meta`` and the ``noise`` of the full-precision data (it needs the arrays left out)."""
+    arrays = {}
+    for n_layers in layer_counts:
+        data = load_shards(folder, n_layers)
+        scale = data["ms"].reshape(len(data["ms"]), -1).max(axis=1).astype(np.float64)
+        relative = data["ms"] / np.maximum(scale, 1e-30)[:, None, None, None]
+        arrays.update({f"layers{n_layers}_ms": round_mantissa(relative.astype(np.float16), mantissa_bits),
+                       f"layers{n_layers}_scale": scale, f"layers{n_layers}_rows": data["rows"],
+                       f"layers{n_layers}_wi": data["wi"].astype(np.float32),
+                       f"layers{n_layers}_wo": data["wo"].astype(np.float32),
+                       f"layers{n_layers}_meta": np.array(json.dumps({"meta": data["meta"], "noise": noise(data),
+                                                                      "mantissa_bits": mantissa_bits}))})
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            np.savez_compressed(f, **arrays)
+    return {"path": str(path), "megabytes": round(Path(path).stat().st_size / 1e6, 1), "layers": list(layer_counts)}
+
+
+def round_mantissa(x: np.ndarray, bits: int) -> np.ndarray:
+    """float16 ``x`` rounded to the nearest value with ``bits`` mantissa bits (the rest zero: they compress)."""
+    drop = 10 - bits
+    u = x.view(np.uint16).astype(np.uint32)
+    return (((u + ((1 << drop) >> 1)) >> drop) << drop).astype(np.uint16).view(np.float16)
+
+
+def unpack(path: Path, n_layers: int) -> dict:
+    with np.load(path) as f:
+        if f"layers{n_layers}_ms" not in f.files:
+            raise FileNotFoundError(f"no {n_layers}-layer data in the pack {path}")
+        info = json.loads(str(f[f"layers{n_layers}_meta"]))
+        ms = f[f"layers{n_layers}_ms"].astype(np.float32) * f[f"layers{n_layers}_scale"][:, None, None, None]
+        return {"rows": f[f"layers{n_layers}_rows"], "wi": f[f"layers{n_layers}_wi"].astype(np.float64),
+                "wo": f[f"layers{n_layers}_wo"].astype(np.float64), "ms": ms.astype(np.float32),
+                "meta": info["meta"], "noise": info["noise"]}
 
 
 def noise(data: dict) -> dict:
     """Monte Carlo noise of the stored estimates: relative standard error of the mean of f |cos wo| per pair
-    (RMS over pairs with signal, relative to the mean signal), and the walk's order 1 against the closed form."""
+    (RMS over pairs with signal, relative to the mean signal), and the walk's order 1 against the closed form
+    (a pack's data bring it, computed when it was packed)."""
+    if "noise" in data:
+        return data["noise"]
     cos_o = np.abs(data["wo"][:, None, :, 2:3])
     signal = np.mean(data["ms"] * cos_o)
     se = np.sqrt(np.mean((data["ms_half_diff"] * cos_o) ** 2))
@@ -221,9 +267,14 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="a tiny dataset for tests (seconds)")
     ap.add_argument("--noise", action="store_true", help="report the Monte Carlo noise of what is in --out")
     ap.add_argument("--throughput", action="store_true", help="time the walk on fixed stacks (paths per second)")
+    ap.add_argument("--pack", type=Path, metavar="FILE", help="write what training reads from --out into one "
+                    "compact file (to train on another machine: python -m training.train --data FILE)")
     a = ap.parse_args(argv)
     if a.throughput:
         print(json.dumps(throughput()))
+        return 0
+    if a.pack:
+        print(json.dumps(pack(a.out, a.pack, a.layers)))
         return 0
     if a.noise:
         for n_layers in a.layers:

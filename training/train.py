@@ -277,8 +277,8 @@ def code_version() -> str:
 def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path | None, log=print) -> dict:
     net.eval()
     metas = data["meta"]
-    split = {k: v for k, v in lobe_errors(net, {k: data[k][info["val_index"]] for k in validation.ARRAYS}).items()
-             if k != "per_config"}
+    val = {k: data[k][info["val_index"]] for k in validation.ARRAYS if k in data}
+    split = {k: v for k, v in lobe_errors(net, val).items() if k != "per_config"}
     manifest = {
         "model": "spongecake multiple scattering", "layers": n_layers, "inputs": n_layers * ms.FEATURES,
         "hidden": list(HIDDEN), "activation": "silu", "outputs": outputs(n_layers),

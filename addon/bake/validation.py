@@ -57,11 +57,12 @@ def lobe_errors(data: dict, predicted: np.ndarray | None = None) -> dict:
     safe = np.maximum(total, 1e-12)
     rel = np.abs(pred - truth).sum(axis=(1, 2, 3)) / safe
     energy = (pred.sum(axis=(1, 2, 3)) - total) / safe
-    noise = (np.abs(data["ms_half_diff"]) * cos_o).sum(axis=(1, 2, 3)) / safe
     keep = total > 1e-3 * total.max()
-    return {"configs": int(keep.sum()), "mean_relative_lobe_error": float(rel[keep].mean()),
-            "median_relative_lobe_error": float(np.median(rel[keep])),
-            "worst_relative_lobe_error": float(rel[keep].max()),
-            "mean_relative_energy_error": float(np.abs(energy[keep]).mean()),
-            "mean_monte_carlo_noise": float(noise[keep].mean()),
-            "per_config": np.where(keep, rel, np.nan).tolist()}
+    out = {"configs": int(keep.sum()), "mean_relative_lobe_error": float(rel[keep].mean()),
+           "median_relative_lobe_error": float(np.median(rel[keep])),
+           "worst_relative_lobe_error": float(rel[keep].max()),
+           "mean_relative_energy_error": float(np.abs(energy[keep]).mean())}
+    if "ms_half_diff" in data:  # a training pack (training.dataset.pack) leaves it out
+        noise = (np.abs(data["ms_half_diff"]) * cos_o).sum(axis=(1, 2, 3)) / safe
+        out["mean_monte_carlo_noise"] = float(noise[keep].mean())
+    return {**out, "per_config": np.where(keep, rel, np.nan).tolist()}

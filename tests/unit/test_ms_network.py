@@ -113,6 +113,17 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
                        "--threads", "1", "--layers", "1", "--init", str(weights)]) == 0
     first = mlp.load(weights / ms.weights_path(1).name).manifest
     assert mlp.load(again / ms.weights_path(1).name).manifest["warm_started_from"]["steps"] == first["steps"]
+    packed = tmp_path / "pack.npz"  # one compact file to train on another machine
+    assert dataset.main(["--out", str(data_dir), "--pack", str(packed)]) == 0
+    for n_layers in (1, 2):
+        full, small = dataset.load(data_dir, n_layers), dataset.load(packed, n_layers)
+        assert np.array_equal(small["rows"], full["rows"]) and np.allclose(small["wo"], full["wo"], atol=1e-7)
+        assert small["noise"] == dataset.noise(full) and small["meta"] == full["meta"]
+        scale = full["ms"].max(axis=(1, 2, 3), keepdims=True)
+        assert np.all(np.abs(small["ms"] - full["ms"]) <= 2.0 ** -(dataset.PACK_MANTISSA_BITS + 1) * full["ms"]
+                      + 1e-4 * scale)
+    assert train.main(["--quick", "--data", str(packed), "--out", str(tmp_path / "from-pack"), "--validation",
+                       str(data_dir), "--threads", "1", "--layers", "1"]) == 0
     mlp.load.cache_clear()
     ms.predict.cache_clear()
 
