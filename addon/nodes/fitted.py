@@ -595,7 +595,5 @@ def shade(b, mapping, p, fit: Fit) -> None:
             b.glossy(color, kw["alpha"], kw["alpha"], b.normal())
         elif kind == "beckmann_refraction":
             b.beckmann_refraction(color, kw["alpha"], kw["ior"], b.view() if kw["normal"] == "view" else b.normal())
-        elif kind == "velvet":
-            b.velvet(color, kw["sigma"])
-        else:
-            getattr(b, kind)(color)
+        else:  # diffuse, translucent, velvet: the backend's method of that name takes the parameters as they are
+            getattr(b, kind)(color, **kw)
