@@ -562,13 +562,17 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
                      f"{pct(sm['truth']['mean_vs_1'])} | {pct(sm['network']['mean_vs_1'])} | "
                      f"{pct(sm['network']['worst_vs_1'])} | {sm['network']['max']:.3f} |")
     worst_view = max(rows, key=lambda r: abs(1.0 - r["ss_ms"]))
+    largest = max(rows, key=lambda r: r["ss_ms"])
     lines += ["", f"Goal {'met' if met('ss_ms') else '**not met**'} in the reference (mean "
               f"{pct(summ['all']['ss_ms']['mean_vs_1'])}, worst {pct(summ['all']['ss_ms']['worst_vs_1'])}, largest "
               f"{summ['all']['ss_ms']['max']:.4f}; above {goal_max:g} in {pct(summ['all']['ss_ms']['gain_share'])} of the "
               f"(stack, view) cases), {'met' if met('cycles') else '**not met**'} in the OSL form (mean "
               f"{pct(summ['all']['cycles']['mean_vs_1'])}, worst {pct(summ['all']['cycles']['worst_vs_1'])}, largest "
               f"{summ['all']['cycles']['max']:.4f}). The worst case is a {worst_view['layers']}-layer stack seen at θo = "
-              f"{worst_view['theta']:.0f}°, φo = {worst_view['phi']:.0f}°. The energy scale (reference module docstring, [ms-energy]) gives "
+              f"{worst_view['theta']:.0f}°, φo = {worst_view['phi']:.0f}°; the largest a, a {largest['layers']}-layer "
+              f"stack at θo = {largest['theta']:.0f}°, φo = {largest['phi']:.0f}°, has an estimate whose own noise "
+              f"there (from its two halves) is {pct(largest['ss_ms_noise'])}. The energy scale (reference module "
+              "docstring, [ms-energy]) gives "
               f"isotropic white stacks 1 less its margin ({pct(model.ENERGY_MARGIN)}, for the noise of its estimates) "
               "at its knots; where a layer is oriented off the normal the reference tabulates the scale over the "
               "view's azimuth too. Between the knots the reference interpolates bilinearly less an estimate of the "
