@@ -471,7 +471,7 @@ def shade(b, p: model.Params) -> None:
     if not p.multiple_scattering:
         _single_scattering(b, p, mu)
         return
-    budget = _energy(b, mu)  # scales single scattering below 1, multiple scattering above
+    budget = _energy(b, p, mu)  # scales single scattering below 1, multiple scattering above
     single = _EnergyScaled(b, b.minimum(budget, (1.0, 1.0, 1.0)))
     multiple = _EnergyScaled(b, b.maximum(budget - 1.0, (0.0, 0.0, 0.0)))
     lobes = _LayerLobes(b, single, multiple) if b.form == "nodes" else None
@@ -536,17 +536,18 @@ def _multiple_scattering(b, p: model.Params) -> None:
         b.translucent(b.input(MS_PREFIX + "Transmission", "color"))
 
 
-def _energy(b, mu):
+def _energy(b, p: model.Params, mu):
     """The ``MS Energy`` inputs interpolated at the view: linear in √μ between the knots of
     ``model.energy_cosines``, the first knot's value closer to grazing (``reference.spongecake.energy_at`` before
     its error bound), as a chain of clamped mixes (knot k takes over from k − 1 as x = (√μ − √μ₀) / step passes
     k − 1 .. k). An oriented stack's knots are all fed the same lookup of its view table (``view_inputs``), whose
-    interpolation is that lookup; the chain stays, because whether a stack is oriented is a value, not the shader's
-    structure (``structure_key``: a texture or an edit may turn it)."""
+    interpolation is that lookup: the first knot is the budget at the view."""
+    total = b.input(MS_PREFIX + MS_ENERGY[0].label, "color")
+    if model.anisotropic(p):
+        return total
     lo = math.sqrt(model.MIN_ENERGY_COS)
     per_step = (len(MS_ENERGY) - 1) / (1.0 - lo)
     root = b.sqrt(mu)
-    total = b.input(MS_PREFIX + MS_ENERGY[0].label, "color")
     for k, prm in enumerate(MS_ENERGY[1:], 1):
         t = b.multiply_add(root, per_step, -(lo * per_step + k - 1))
         total = b.mix_clamped(total, b.input(MS_PREFIX + prm.label, "color"), t)
@@ -628,8 +629,8 @@ def _merged_alpha(b, a1, a2, share):
     """(α_x, α_y) of the lobe that stands for two GGX lobes, the second's share s of their weight: isotropic lobes
     (α_x is α_y) mix α linearly (GGX's albedo is nearly linear in α, so the pair's energy changes little); lobes with
     the same α_y (fibers: 1) mix α_x harmonically, 1/α_x = (1 − s)/α_x1 + s/α_x2, which keeps the weighted peak
-    D(h = n) = 1/(π α_x α_y) of their highlight (a linear mix lowers a sharp fiber layer's peak by 4%:
-    tests/unit/test_mapping.py); other lobes mix each axis so."""
+    D(h = n) = 1/(π α_x α_y) of their highlight (a linear mix blurs the sharp fibers' line; both measured in
+    docs/accuracy.md); other lobes mix each axis so."""
     (ax1, ay1), (ax2, ay2) = a1, a2
     if ax1 is ay1 and ax2 is ay2:
         alpha = ax1 + (ax2 - ax1) * share
