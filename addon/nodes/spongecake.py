@@ -47,9 +47,6 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
   over asin(√μ) (the view's angle near the normal, √μ near grazing) and the azimuth, looked up at the view
   (``view_inputs``, ``view_table``, ``view_wiring``); a
   texture-driven bake keeps the material's own scale for every texel. [approx: ms-energy]
-  In the node group each flake layer's GGX lobe and the network's lobe for that layer are one Glossy BSDF (colours
-  summed, α mixed: ``_LayerLobes``), and the energy inputs are the smaller of the two forms' budgets, so that neither
-  form's furnace exceeds 1. [approx: ms-merged-lobe]
 
 The node-group form also evaluates Schlick's F at h = flake normal [approx: schlick-at-view];
 the OSL form evaluates it per microfacet (generalized_schlick_bsdf).
@@ -65,7 +62,7 @@ import numpy as np
 from ..models import spongecake as model
 from ..models.params import Param
 from .closures_np import SHARP_ALBEDO
-from .expr import LAMBERT_CLOSURES, NumpyBackend, closure_furnace, schlick, schlick_at_view
+from .expr import NumpyBackend, closure_furnace, schlick
 
 
 # Every approximation the mapping makes, with a configuration that isolates it (docs/accuracy.md measures
@@ -122,10 +119,6 @@ APPROXIMATIONS = {
                              "scale: only their split between the closures is that of normal incidence",
                              {**_one(type="fiber", roughness=0.3, thickness=0.5, orientation=[1, 0, 0]),
                               "multiple_scattering": True}),
-    "ms-merged-lobe": ("node group only: each flake layer's GGX lobe and the network's lobe for that layer are one "
-                       "closure (colours summed, α mixed, about the single-scattering lobe's normal; the energy inputs "
-                       "the smaller of both forms' budgets)",
-                       {**_one(type="surface", roughness=0.2, thickness=2.0), "multiple_scattering": True}),
     "schlick-at-view": ("Schlick F at h = flake normal, not per microfacet (node group reflection; both forms' "
                         "transmission)",
                         _one(type="surface", roughness=0.3, thickness=1e4, f0=[0.2, 0.2, 0.2])),
@@ -175,8 +168,6 @@ def approximations_used(p: model.Params) -> list[str]:
         used.add("mirror-attenuation")
     if p.multiple_scattering:
         used |= {"ms-energy", "ms-weights-at-normal", "lambert-hg", "diffusivity-exit", "scattering-share"}
-        if any(layer.is_flake for layer in p.layers):
-            used.add("ms-merged-lobe")
     return [name for name in APPROXIMATIONS if name in used]
 
 
@@ -370,19 +361,8 @@ def energy_values(p: model.Params) -> dict:
     whatever the single-scattering mapping's error, even where that single scattering alone exceeds 1."""
     from ..bake.spongecake import budget_rows, energy_azimuths
 
-    scale = _forms_budget(p, lambda left, lobes: budget_rows(p, left, lobes, model.ENERGY_KNOTS, energy_azimuths(p),
-                                                             BUDGET_SUBSTEPS)).min(axis=1)
+    scale = budget_rows(p, _left, _ms_furnace, model.ENERGY_KNOTS, energy_azimuths(p), BUDGET_SUBSTEPS).min(axis=1)
     return {MS_PREFIX + prm.label: tuple(float(v) for v in row) for prm, row in zip(MS_ENERGY, scale)}
-
-
-def _forms_budget(p: model.Params, budget_of) -> np.ndarray:
-    """``budget_of(left_of, lobes_of)`` for the OSL form, or the smaller of it and the node group's where that
-    merges lobes (``_LayerLobes``): the inputs are the same for both forms, and neither may return more light than
-    it receives (a table each made safe between its knots, so their minimum is safe for both)."""
-    budget = budget_of(_left, _ms_furnace)
-    if any(layer.is_flake for layer in p.layers):
-        budget = np.minimum(budget, budget_of(_merged_left, _merged_ms_furnace))
-    return budget
 
 
 def view_inputs(p: model.Params) -> dict:
@@ -405,8 +385,8 @@ def _view_energy(p: model.Params, weights: str):
     from .view_table import ViewTable
 
     rows, azimuths = model.VIEW_ENERGY_GRID
-    table = _forms_budget(p, lambda left, lobes: budget_rows(p, left, lobes, rows, model.uniform_azimuths(azimuths),
-                                                             *VIEW_BUDGET_SUBSTEPS, cosines=model.view_table_cosines))
+    table = budget_rows(p, _left, _ms_furnace, rows, model.uniform_azimuths(azimuths), *VIEW_BUDGET_SUBSTEPS,
+                        cosines=model.view_table_cosines)
     return ViewTable(table, model.view_table_lowest())
 
 
@@ -438,29 +418,8 @@ def _ms_furnace(p: model.Params, wo):
                            SHARP_ALBEDO)
 
 
-def _merged_left(p: model.Params, wo):
-    """``_left`` of the node group, whose single scattering takes the α of its lobes merged with multiple
-    scattering's (``_LayerLobes``): its furnace with every energy input 1 (no multiple scattering)."""
-    return 1.0 - _merged_furnace(p, wo, 1.0)
-
-
-def _merged_ms_furnace(p: model.Params, wo):
-    """``_ms_furnace`` of the node group: what energy inputs of 2 add to its furnace over inputs of 1 (its furnace is
-    linear in min(e, 1) and max(e − 1, 0): the merged α does not depend on e)."""
-    return _merged_furnace(p, wo, 2.0) - _merged_furnace(p, wo, 1.0)
-
-
-def _merged_furnace(p: model.Params, wo, budget: float):
-    """The node group's white furnace with the Dirac, all its ``MS Energy`` inputs ``budget``."""
-    lit = replace(p, delta_transmission=True)
-    values = {**input_values(replace(lit, multiple_scattering=False)), **_lobe_values(p),
-              **{MS_PREFIX + prm.label: (budget,) * 3 for prm in MS_ENERGY}}
-    return closure_furnace(lambda w: _numpy_shaded(lit, values, w, shade, "nodes"), wo, ENERGY_QUADRATURE,
-                           SHARP_ALBEDO)
-
-
-def _numpy_shaded(p: model.Params, values: dict, wo, shade_with, form: str = "osl"):
-    b = NumpyBackend(wo, values, form)
+def _numpy_shaded(p: model.Params, values: dict, wo, shade_with):
+    b = NumpyBackend(wo, values, "osl")
     shade_with(b, p)
     return b
 
@@ -468,23 +427,10 @@ def _numpy_shaded(p: model.Params, values: dict, wo, shade_with, form: str = "os
 def shade(b, p: model.Params) -> None:
     """Build the closure mix for the stack structure of ``p`` on backend ``b`` (see module docstring)."""
     mu = b.cos_view()
-    if not p.multiple_scattering:
-        _single_scattering(b, p, mu)
-        return
-    budget = _energy(b, p, mu)  # scales single scattering below 1, multiple scattering above
-    single = _EnergyScaled(b, b.minimum(budget, (1.0, 1.0, 1.0)))
-    multiple = _EnergyScaled(b, b.maximum(budget - 1.0, (0.0, 0.0, 0.0)))
-    lobes = _LayerLobes(b, single, multiple) if b.form == "nodes" else None
-    _single_scattering(lobes.single if lobes else single, p, mu)
-    _multiple_scattering(lobes.multiple if lobes else multiple, p)
-    single.flush()
-    multiple.flush()
-    if lobes:
-        lobes.merge()
-
-
-def _single_scattering(b, p: model.Params, mu) -> None:
-    """The layers' closures, the substrate's and the Dirac transmission's."""
+    if p.multiple_scattering:  # the energy budget (``_energy``) scales single scattering below 1, MS above
+        budget = _energy(b, mu)
+        multiple = _EnergyScaled(b, b.maximum(budget - 1.0, (0.0, 0.0, 0.0)))
+        b = _EnergyScaled(b, b.minimum(budget, (1.0, 1.0, 1.0)))
     terms = _layers(b, p, mu, "")
     stack = _prod(*[t["tau"] for t in terms])
     if p.substrate is not None:
@@ -492,6 +438,8 @@ def _single_scattering(b, p: model.Params, mu) -> None:
         shade_substrate(b, p.substrate, stack * exit_)
     if p.delta_transmission and p.substrate is None:  # every substrate blocks or refracts it (reference)
         b.transparent(b.scale((1.0, 1.0, 1.0), stack))
+    if p.multiple_scattering:
+        _multiple_scattering(multiple, p)
 
 
 def _layers(b, p: model.Params, mu, prefix: str, along_normal: bool = False, names=None) -> list[dict]:
@@ -536,18 +484,15 @@ def _multiple_scattering(b, p: model.Params) -> None:
         b.translucent(b.input(MS_PREFIX + "Transmission", "color"))
 
 
-def _energy(b, p: model.Params, mu):
+def _energy(b, mu):
     """The ``MS Energy`` inputs interpolated at the view: linear in √μ between the knots of
     ``model.energy_cosines``, the first knot's value closer to grazing (``reference.spongecake.energy_at`` before
-    its error bound), as a chain of clamped mixes (knot k takes over from k − 1 as x = (√μ − √μ₀) / step passes
-    k − 1 .. k). An oriented stack's knots are all fed the same lookup of its view table (``view_inputs``), whose
-    interpolation is that lookup: the first knot is the budget at the view."""
-    total = b.input(MS_PREFIX + MS_ENERGY[0].label, "color")
-    if model.anisotropic(p):
-        return total
+    its error bound), as a
+    chain of clamped mixes (knot k takes over from k − 1 as x = (√μ − √μ₀) / step passes k − 1 .. k)."""
     lo = math.sqrt(model.MIN_ENERGY_COS)
     per_step = (len(MS_ENERGY) - 1) / (1.0 - lo)
     root = b.sqrt(mu)
+    total = b.input(MS_PREFIX + MS_ENERGY[0].label, "color")
     for k, prm in enumerate(MS_ENERGY[1:], 1):
         t = b.multiply_add(root, per_step, -(lo * per_step + k - 1))
         total = b.mix_clamped(total, b.input(MS_PREFIX + prm.label, "color"), t)
@@ -555,93 +500,18 @@ def _energy(b, p: model.Params, mu):
 
 
 class _EnergyScaled:
-    """A backend that passes everything to ``b`` but multiplies the colour of each closure by ``scale``; the colours
-    of the closures without parameters (``LAMBERT_CLOSURES``) are summed first and scaled once each by ``flush``
-    (multiple scattering's are constants, so their sum costs a render nothing)."""
+    """A backend that passes everything to ``b`` but multiplies the colour of each closure by ``scale``."""
 
     CLOSURES = ("glossy", "diffuse", "translucent", "transparent", "conductor", "dielectric")
 
     def __init__(self, b, scale):
         self._b, self._scale = b, scale
-        self._lamberts: dict = {}
 
     def __getattr__(self, name):
         attr = getattr(self._b, name)
-        if name in LAMBERT_CLOSURES:
-            return lambda color: self._lambert(name, color)
         if name not in self.CLOSURES:
             return attr
-        return lambda color, *args, **kw: attr(self.scaled(color), *args, **kw)
-
-    def scaled(self, color):
-        return color * self._scale
-
-    def _lambert(self, name: str, color) -> None:
-        previous = self._lamberts.get(name)
-        self._lamberts[name] = color if previous is None else previous + color
-
-    def flush(self) -> None:
-        for name, color in self._lamberts.items():
-            getattr(self._b, name)(self.scaled(color))
-        self._lamberts.clear()
-
-
-class _GlossyRecorder:
-    """A backend that passes everything to ``b`` but records its ``glossy`` calls instead of making them."""
-
-    def __init__(self, b):
-        self._b, self.calls = b, []
-
-    def __getattr__(self, name):
-        return getattr(self._b, name)
-
-    def glossy(self, color, alpha_x, alpha_y, normal, tangent=None, f0=None):
-        if f0 is not None:  # what the node group's Glossy BSDF gets (``NodeBackend.glossy``)
-            color = schlick_at_view(self._b, color, f0, normal)
-        self.calls.append((color, alpha_x, alpha_y, normal, tangent))
-
-
-class _LayerLobes:
-    """Node group with multiple scattering: each flake layer's GGX lobe and the network's lobe for that layer (the
-    same layer type, at a nearly equal roughness and orientation) become one Glossy BSDF about the single-scattering
-    lobe's normal and tangent, one closure a layer less to evaluate. Its colour is the two colours' sum, each scaled
-    by its energy budget (``single`` and ``multiple``: ``_EnergyScaled``); its α mixes theirs by the network lobe's
-    share of the colours before those scales (channel means; ``_merged_alpha``), so that it does not depend on the
-    budget and the node group's furnace stays linear in it (``_merged_furnace``: the budget is computed on the merged
-    lobes too and keeps their furnace at most 1). ``merge`` makes the merged closures on ``b``.
-    [approx: ms-merged-lobe]"""
-
-    def __init__(self, b, single, multiple):
-        self._b, self._scaled = b, (single, multiple)
-        self.single, self.multiple = _GlossyRecorder(single), _GlossyRecorder(multiple)
-
-    def merge(self) -> None:
-        b, (single, multiple) = self._b, self._scaled
-        for (c1, ax1, ay1, normal, tangent), (c2, ax2, ay2, _, _) in zip(self.single.calls, self.multiple.calls,
-                                                                          strict=True):
-            w2 = b.channel_mean(c2)
-            share = w2 / b.maximum(b.channel_mean(c1) + w2, 1e-12)
-            alpha_x, alpha_y = _merged_alpha(b, (ax1, ay1), (ax2, ay2), share)
-            b.glossy(single.scaled(c1) + multiple.scaled(c2), alpha_x, alpha_y, normal, tangent)
-
-
-def _merged_alpha(b, a1, a2, share):
-    """(α_x, α_y) of the lobe that stands for two GGX lobes, the second's share s of their weight: isotropic lobes
-    (α_x is α_y) mix α linearly (GGX's albedo is nearly linear in α, so the pair's energy changes little); lobes with
-    the same α_y (fibers: 1) mix α_x harmonically, 1/α_x = (1 − s)/α_x1 + s/α_x2, which keeps the weighted peak
-    D(h = n) = 1/(π α_x α_y) of their highlight (a linear mix blurs the sharp fibers' line; both measured in
-    docs/accuracy.md); other lobes mix each axis so."""
-    (ax1, ay1), (ax2, ay2) = a1, a2
-    if ax1 is ay1 and ax2 is ay2:
-        alpha = ax1 + (ax2 - ax1) * share
-        return alpha, alpha
-
-    def harmonic(x1, x2):  # 1 / (1/x1 + s (1/x2 − 1/x1)): the inverses are constants where the inputs are
-        inverse = 1.0 / b.maximum(x1, 1e-8)
-        return 1.0 / b.multiply_add(share, 1.0 / b.maximum(x2, 1e-8) - inverse, inverse)
-
-    same_y = isinstance(ay1, float) and isinstance(ay2, float) and ay1 == ay2
-    return harmonic(ax1, ax2), ay1 if same_y else harmonic(ay1, ay2)
+        return lambda color, *args, **kw: attr(color * self._scale, *args, **kw)
 
 
 def _slab_transmission(b, t):

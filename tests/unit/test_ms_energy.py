@@ -101,26 +101,15 @@ def _form_furnace(p, form, wo):
     return closure_furnace(lambda w: _backend("spongecake", p, form, w), wo, quadratures=SHARP_ALBEDO)
 
 
-def _forms_furnace(p, wo) -> dict:
-    return {form: _form_furnace(p, form, wo) for form in ("osl", "nodes")}
-
-
-def _limiting(a: dict) -> np.ndarray:
-    """Per view and channel the larger of the forms' furnaces: the form whose budget the shared inputs carry there."""
-    return np.maximum(a["osl"], a["nodes"])
-
-
+@pytest.mark.parametrize("form", ["osl", "nodes"])
 @pytest.mark.parametrize("name", ["flakes over a medium (glows 1.5x unscaled)", "four layers"])
-def test_cycles_forms_white_furnace_is_one(name):
-    """In the forms the scale is built on what the forms' own single scattering leaves, so the rendered white
-    furnace is 1 whatever the single-scattering mapping's error (views above: the forms' MS is light from above).
-    The inputs carry the smaller of the two forms' budgets (the node group merges lobes, ``_LayerLobes``): the form
-    that sets it returns 1, the other at most 1 (here 1.4% short on average in OSL for the four layers)."""
+def test_cycles_forms_white_furnace_is_one(form, name):
+    """In the forms the scale is built on what the form's own single scattering leaves, so the rendered white
+    furnace is 1 whatever the single-scattering mapping's error (views above: the forms' MS is light from above)."""
     p = _params({"layers": WHITE[name]})
-    a = _forms_furnace(p, _views(9, 8, (1.0,)))
-    assert np.mean(np.abs(_limiting(a) - 1.0)) <= 0.008, _limiting(a)[:, 0]
-    for form, furnace in a.items():
-        assert np.mean(np.abs(furnace - 1.0)) <= 0.02 and furnace.max() <= 1.02, (form, furnace[:, 0])
+    a = _form_furnace(p, form, _views(9, 8, (1.0,)))
+    assert np.mean(np.abs(a - 1.0)) <= 0.008, a[:, 0]
+    assert a.max() <= 1.02
 
 
 @pytest.mark.parametrize("name", list(OTHERS))
@@ -290,21 +279,19 @@ def test_the_reference_follows_the_azimuth_of_oriented_stacks():
     assert ref.energy_tables(_params({"layers": WHITE["four layers"]}))[0].shape == (8, 1, 3)
 
 
-def test_the_cycles_forms_follow_the_azimuth_of_oriented_stacks(monkeypatch):
+@pytest.mark.parametrize("form", ["osl", "nodes"])
+def test_the_cycles_forms_follow_the_azimuth_of_oriented_stacks(form, monkeypatch):
     """The forms feed an oriented stack's ``MS Energy`` knots from a table over the view's √μ and azimuth
-    (``view_inputs``), so its white furnace is 1 at every azimuth (in the form that sets the shared budget there; the
-    other at most 1: OSL 1.8% short on average here); the knots alone (the least over the azimuths) leave it 3.5%
-    short on average here, 9% at worst."""
+    (``view_inputs``), so its white furnace is 1 at every azimuth; the knots alone (the least over the azimuths) leave
+    it 3.5% short on average here, 9% at worst."""
     p = _params(OTHERS["tilted flakes over in-plane fibers"])
     rng = np.random.default_rng(11)
     wo = spherical(np.cos(np.radians(rng.uniform(0.0, 85.0, 48))), rng.uniform(0.0, 2.0 * np.pi, 48))
-    a = _forms_furnace(p, wo)
-    assert np.mean(np.abs(_limiting(a) - 1.0)) <= 0.008, _limiting(a)[:, 0]
-    for form, furnace in a.items():
-        assert np.mean(np.abs(furnace - 1.0)) <= 0.025 and furnace.max() <= 1.015, (form, furnace[:, 0])
+    a = _form_furnace(p, form, wo)
+    assert np.mean(np.abs(a - 1.0)) <= 0.008 and a.max() <= 1.015, a[:, 0]
     monkeypatch.setattr(mapping, "view_inputs", lambda q: {})
-    knots = _forms_furnace(p, wo)
-    assert np.mean(np.abs(_limiting(knots) - 1.0)) > 0.025, _limiting(knots)[:, 0]
+    knots = _form_furnace(p, form, wo)
+    assert np.mean(np.abs(knots - 1.0)) > 0.025, knots[:, 0]
 
 
 def test_isotropic_stacks_feed_no_input_from_a_view_table():
