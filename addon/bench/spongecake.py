@@ -328,9 +328,9 @@ def _directions(views) -> np.ndarray:
 def white_furnace(sizes: MsSizes) -> list[dict]:
     """Per configuration and view direction: the energy a white furnace returns, counting the unscattered light
     (the Dirac part, so a non-absorbing stack must give exactly 1): SS + MS from the model, SS alone, the random
-    walk's total (its own shortfall from 1 is truncation at 64 orders plus noise), and SS + MS as the OSL form
-    renders it (its numpy prediction with the Dirac as transparency; the node group's is the same for these
-    stacks, which have no Fresnel)."""
+    walk's total (its own shortfall from 1 is truncation at 64 orders plus noise), and SS + MS as each Cycles form
+    renders it (its numpy prediction with the Dirac as transparency; the node group's differs from OSL's by its
+    merged fiber lobes, [ms-merged-fiber-lobe], and its own budget)."""
     from ..bake.spongecake import predict
     from ..nodes import _backend
     from ..nodes.closures_np import SHARP_ALBEDO
@@ -342,7 +342,8 @@ def white_furnace(sizes: MsSizes) -> list[dict]:
         views = furnace_views(model.anisotropic(p))
         wo = _directions(views)
         lit = model.params_from_dict({**config, "multiple_scattering": True, "delta_transmission": True})
-        cycles = closure_furnace(lambda w, q=lit: _backend(model.ID, q, "osl", w), wo, quadratures=SHARP_ALBEDO)
+        cycles, nodes = (closure_furnace(lambda w, q=lit, f=form: _backend(model.ID, q, f, w), wo,
+                                         quadratures=SHARP_ALBEDO) for form in ("osl", "nodes"))
         p_ss = model.params_from_dict(config)
         through = reference.delta_transmittance(model.params_from_dict({**config, "delta_transmission": True}), wo)
         twice = [reference.directional_albedo(p, wo, n=sizes.furnace_samples // 2, seed=i + 10_000 * h)
@@ -356,6 +357,7 @@ def white_furnace(sizes: MsSizes) -> list[dict]:
                         "oriented": model.anisotropic(p),
                         "ss_ms": float(a_ms[k].mean()), "ss": float(a_ss[k].mean()),
                         "truth": float(truth[k].mean()), "cycles": float(cycles[k].mean()),
+                        "nodes": float(nodes[k].mean()),
                         "network": float(network[k].mean()),
                         "ss_ms_noise": float(0.5 * np.abs(twice[0][k] - twice[1][k]).mean())})
     return out
@@ -379,8 +381,8 @@ DENSE_THETAS = tuple(float(t) for t in range(0, 89, 4))  # the Cycles form's fur
 DENSE_AZIMUTHS = 72  # of view azimuths (uniform from 0; oriented stacks only)
 
 
-def dense_cycles_furnace(sizes: MsSizes) -> np.ndarray:
-    """(stacks, views) the OSL form's white furnace (its numpy prediction, the Dirac as transparency) of the furnace
+def dense_cycles_furnace(sizes: MsSizes, form: str) -> np.ndarray:
+    """(stacks, views) the form's white furnace (its numpy prediction, the Dirac as transparency) of the furnace
     bench's stacks on ``DENSE_THETAS`` × ``DENSE_AZIMUTHS`` views (one azimuth for isotropic stacks): between the
     azimuths and angles of the energy tables, where their interpolation is what counts."""
     from ..nodes import _backend
@@ -392,17 +394,17 @@ def dense_cycles_furnace(sizes: MsSizes) -> np.ndarray:
         lit = model.params_from_dict({**config, "multiple_scattering": True, "delta_transmission": True})
         azimuths = np.arange(DENSE_AZIMUTHS) * (360.0 / DENSE_AZIMUTHS) if model.anisotropic(lit) else [0.0]
         wo = _directions([(t, phi) for t in DENSE_THETAS for phi in azimuths])
-        out.append(closure_furnace(lambda w, q=lit: _backend(model.ID, q, "osl", w), wo,
+        out.append(closure_furnace(lambda w, q=lit: _backend(model.ID, q, form, w), wo,
                                    quadratures=SHARP_ALBEDO).mean(axis=1))
     return np.concatenate(out)
 
 
 def furnace_summary(rows: list[dict]) -> dict:
-    """Mean and worst |1 - a| and |a - truth| for SS + MS, SS only, the OSL form's SS + MS and SS + the network's
-    lobes before the energy scale, and the walk's |1 - truth|."""
-    a = {k: np.array([r[k] for r in rows]) for k in ("ss_ms", "ss", "truth", "cycles", "network")}
+    """Mean and worst |1 - a| and |a - truth| for SS + MS, SS only, the OSL form's and the node group's SS + MS and
+    SS + the network's lobes before the energy scale, and the walk's |1 - truth|."""
+    a = {k: np.array([r[k] for r in rows]) for k in ("ss_ms", "ss", "truth", "cycles", "nodes", "network")}
     out = {}
-    for name in ("ss_ms", "ss", "cycles", "network"):
+    for name in ("ss_ms", "ss", "cycles", "nodes", "network"):
         e1, et = np.abs(1.0 - a[name]), np.abs(a[name] - a["truth"])
         out[name] = {"mean_vs_1": float(e1.mean()), "worst_vs_1": float(e1.max()),
                      "mean_vs_truth": float(et.mean()), "worst_vs_truth": float(et.max()),
@@ -557,21 +559,25 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "count more views). The energy returned counts the "
               "unscattered light (the Dirac part), so the exact answer is 1. SS + MS: the model's directional albedo "
               f"with the network and its energy scale ({sizes.furnace_samples} samples per direction; its own noise, "
-              f"from two halves: {pct(summ['all']['ss_ms']['noise'])} RMS) plus the unscattered light; OSL: the same "
-              "as the OSL form renders it (numpy prediction; its GGX lobes by their own quadrature); Monte Carlo: the "
+              f"from two halves: {pct(summ['all']['ss_ms']['noise'])} RMS) plus the unscattered light; OSL, node group: "
+              "the same as each Cycles form renders it (numpy prediction; its GGX lobes by their own quadrature; the "
+              "node group merges each fiber layer's lobe with the network's, [ms-merged-fiber-lobe]; each form's "
+              "energy budget is computed on its own prediction); Monte Carlo: the "
               f"random walk's total ({sizes.furnace_paths} paths; short of 1 only by truncation at 64 orders, since "
               f"every path keeps weight 1); network alone: SS plus the network's lobes before the energy scale (exact "
               f"albedos). Goal for SS + MS (issue 15): mean |1 − a| ≤ {pct(goal_mean)}, worst ≤ "
               f"{pct(goal_worst)}, never above {goal_max:g}.",
               "",
               "| stacks | SS + MS mean \\|1 − a\\| | worst | largest a | OSL mean \\|1 − a\\| | worst | largest a | "
+              "node group mean \\|1 − a\\| | worst | largest a | "
               "SS + MS vs Monte Carlo mean | SS only mean \\|1 − a\\| | Monte Carlo mean \\|1 − a\\| | "
               "network alone mean \\|1 − a\\| | worst | largest a |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for label, sm in summ.items():
         lines.append(f"| {label} | {pct(sm['ss_ms']['mean_vs_1'])} | {pct(sm['ss_ms']['worst_vs_1'])} | "
                      f"{sm['ss_ms']['max']:.4f} | {pct(sm['cycles']['mean_vs_1'])} | "
                      f"{pct(sm['cycles']['worst_vs_1'])} | {sm['cycles']['max']:.4f} | "
+                     f"{pct(sm['nodes']['mean_vs_1'])} | {pct(sm['nodes']['worst_vs_1'])} | {sm['nodes']['max']:.4f} | "
                      f"{pct(sm['ss_ms']['mean_vs_truth'])} | {pct(sm['ss']['mean_vs_1'])} | "
                      f"{pct(sm['truth']['mean_vs_1'])} | {pct(sm['network']['mean_vs_1'])} | "
                      f"{pct(sm['network']['worst_vs_1'])} | {sm['network']['max']:.3f} |")
@@ -583,7 +589,9 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               f"{summ['all']['ss_ms']['max']:.4f}; above {goal_max:g} in {pct(summ['all']['ss_ms']['gain_share'])} of the "
               f"(stack, view) cases), {'met' if met('cycles') else '**not met**'} in the OSL form (mean "
               f"{pct(summ['all']['cycles']['mean_vs_1'])}, worst {pct(summ['all']['cycles']['worst_vs_1'])}, largest "
-              f"{summ['all']['cycles']['max']:.4f}). The worst case is a {worst_view['layers']}-layer stack seen at θo = "
+              f"{summ['all']['cycles']['max']:.4f}), {'met' if met('nodes') else '**not met**'} in the node group (mean "
+              f"{pct(summ['all']['nodes']['mean_vs_1'])}, worst {pct(summ['all']['nodes']['worst_vs_1'])}, largest "
+              f"{summ['all']['nodes']['max']:.4f}). The worst case is a {worst_view['layers']}-layer stack seen at θo = "
               f"{worst_view['theta']:.0f}°, φo = {worst_view['phi']:.0f}°. The largest a, a {largest['layers']}-layer "
               f"stack at θo = {largest['theta']:.0f}°, φo = {largest['phi']:.0f}°: {FURNACE_REPEATS} more independent "
               f"estimates of that view ({sizes.furnace_samples} samples each) give {again.mean():.4f} ± "
@@ -597,12 +605,13 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "in a table over asin(√μ) and the azimuth (a packed float image, bilinear) without that estimate; an "
               "energy budget (training.md) caps their single scattering where it alone returns more than it "
               "receives, and the tables are lowered where interpolating between their knots would exceed them."]
-    dense = dense_cycles_furnace(sizes)
-    lines += ["", f"The OSL form on a denser grid of views (θo {DENSE_THETAS[0]:g}° to {DENSE_THETAS[-1]:g}° in steps "
-              f"of {DENSE_THETAS[1] - DENSE_THETAS[0]:g}°; oriented "
-              f"stacks at {DENSE_AZIMUTHS} azimuths; {dense.size} (stack, view) cases): mean |1 − a| "
-              f"{pct(np.mean(np.abs(1.0 - dense)))}, worst {pct(np.max(np.abs(1.0 - dense)))}, largest "
-              f"{dense.max():.4f}; above {goal_max:g} in {pct(np.mean(dense > goal_max))} of the cases."]
+    dense = {form: dense_cycles_furnace(sizes, form) for form in ("osl", "nodes")}
+    lines += ["", f"The Cycles forms on a denser grid of views (θo {DENSE_THETAS[0]:g}° to {DENSE_THETAS[-1]:g}° in "
+              f"steps of {DENSE_THETAS[1] - DENSE_THETAS[0]:g}°; oriented stacks at {DENSE_AZIMUTHS} azimuths; "
+              f"{dense['osl'].size} (stack, view) cases): "
+              + "; ".join(f"{label} mean |1 − a| {pct(np.mean(np.abs(1.0 - a)))}, worst {pct(np.max(np.abs(1.0 - a)))}, "
+                          f"largest {a.max():.4f}, above {goal_max:g} in {pct(np.mean(a > goal_max))} of the cases"
+                          for label, a in (("OSL", dense["osl"]), ("node group", dense["nodes"]))) + "."]
     # --- rendered
     from ..reference.spongecake_truth import TruthSettings
 

@@ -46,14 +46,22 @@ def numpy_backend(model_id: str, p, form: str, wo):
 
     mapping = MAPPINGS[model_id]
     bulk = mapping.numpy_bulk(p, form) if hasattr(mapping, "numpy_bulk") else None
-    return NumpyBackend(wo, {**mapping.input_values(p), **view_inputs(model_id, p)}, form, bulk)
+    return NumpyBackend(wo, {**input_values(model_id, p, form), **view_inputs(model_id, p, form)}, form, bulk)
 
 
-def view_inputs(model_id: str, p) -> dict:
-    """The inputs that the material feeds from a table over the view direction (the mapping's ``view_inputs``:
+def input_values(model_id: str, p, form: str) -> dict:
+    """Socket name → value of every input of ``form``'s shader for ``p``: the model parameters (the mapping's
+    ``input_values``) and what Lamina bakes for that form (its ``baked_values``: SpongeCake's multiple scattering)."""
+    mapping = MAPPINGS[model_id]
+    baked = mapping.baked_values(p, form) if hasattr(mapping, "baked_values") else {}
+    return {**mapping.input_values(p), **baked}
+
+
+def view_inputs(model_id: str, p, form: str) -> dict:
+    """The inputs that ``form``'s shader is fed from a table over the view direction (the mapping's ``view_inputs``:
     socket name → ``view_table.ViewTable``; ``view_wiring`` links them), none for most mappings."""
     mapping = MAPPINGS[model_id]
-    return mapping.view_inputs(p) if hasattr(mapping, "view_inputs") else {}
+    return mapping.view_inputs(p, form) if hasattr(mapping, "view_inputs") else {}
 
 
 def _backend(model_id: str, p, form: str, wo, fit=None):

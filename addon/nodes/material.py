@@ -26,8 +26,8 @@ import numpy as np
 from ..bake.textures import BakeError
 from ..models import MODELS
 from ..models.micrograin import WRAPPED, Bulk
-from . import (FORMS, MAPPING_KINDS, MAPPINGS, choice, fittable, fitted, image_values, osl, pruning, shade,
-               view_inputs, view_wiring)
+from . import (FORMS, MAPPING_KINDS, MAPPINGS, choice, fittable, fitted, image_values, input_values, osl, pruning,
+               shade, view_inputs, view_wiring)
 from .expr import BULK_INPUT, TANGENT_INPUT, NumpyBackend, OslBackend
 from .node_backend import GENERATOR_VERSION, NodeBackend
 
@@ -508,7 +508,7 @@ def apply_decision(mat, decision) -> None:
 # --------------------------------------------------------------------------------- multiple scattering
 
 MS_KEY = "lamina_ms_key"
-_ms_shares: dict[str, float] = {}
+_ms_shares: dict[tuple[str, str], float] = {}
 
 
 def ms_key(model_id: str, p) -> str:
@@ -531,13 +531,13 @@ def bake_constants(mat) -> bool:
     if not getattr(p, "multiple_scattering", False) or node is None:
         unwired = node is not None and _wire_view_inputs(mat, node, {})
         return mat.pop(MS_KEY, None) is not None or unwired
-    values = MAPPINGS[model_id].ms_values(p)
+    values = MAPPINGS[model_id].ms_values(p, form_of(mat))
     missing = any(socket_key(node, name) not in node.inputs for name in values)
     if missing or mat.get(GENERATOR_KEY) != GENERATOR_VERSION:
         _rebuild(mat, model_id, p, form_of(mat), mapping_of(mat), refit=False)
         return True
     changed = _write_values(node, values)
-    changed = _wire_view_inputs(mat, node, view_inputs(model_id, p)) or changed
+    changed = _wire_view_inputs(mat, node, view_inputs(model_id, p, form_of(mat))) or changed
     key = ms_key(model_id, p)
     if mat.get(MS_KEY) != key:
         mat[MS_KEY], changed = key, True
@@ -572,9 +572,9 @@ def ms_energy_share(mat) -> float:
     cached per bake key. Raises ParamError for stacks no network covers."""
     model_id, p = current_params(mat)
     p = MODELS[model_id].validate({**p.to_dict(), "multiple_scattering": True}).params
-    key = ms_key(model_id, p)
+    key = ms_key(model_id, p), form_of(mat)
     if key not in _ms_shares:
-        _ms_shares[key] = MAPPINGS[model_id].ms_share(p)
+        _ms_shares[key] = MAPPINGS[model_id].ms_share(p, key[1])
     return _ms_shares[key]
 
 
@@ -625,7 +625,7 @@ def _new_node(mat, mapping_id: str, p, form: str, fit=None):
             node.label = text.name
             node.inputs[TANGENT_INPUT].hide = True
         node.width = 240
-        _write_values(node, MAPPINGS[mapping_id].input_values(p))
+        _write_values(node, input_values(mapping_id, p, form))
     except BaseException:
         tree.nodes.remove(node)
         raise

@@ -47,6 +47,8 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
   over asin(√μ) (the view's angle near the normal, √μ near grazing) and the azimuth, looked up at the view
   (``view_inputs``, ``view_table``, ``view_wiring``); a
   texture-driven bake keeps the material's own scale for every texel. [approx: ms-energy]
+  In the node group each fiber layer's GGX lobe and the network's lobe for that layer are one Glossy BSDF (colours
+  summed, α_x mixed harmonically: ``_FiberLobes``), and its budget is computed on that. [approx: ms-merged-fiber-lobe]
 
 The node-group form also evaluates Schlick's F at h = flake normal [approx: schlick-at-view];
 the OSL form evaluates it per microfacet (generalized_schlick_bsdf).
@@ -55,14 +57,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from functools import lru_cache
+from functools import lru_cache, partial
 
 import numpy as np
 
 from ..models import spongecake as model
 from ..models.params import Param
 from .closures_np import SHARP_ALBEDO
-from .expr import NumpyBackend, closure_furnace, schlick
+from .expr import NumpyBackend, closure_furnace, schlick, schlick_at_view
 
 
 # Every approximation the mapping makes, with a configuration that isolates it (docs/accuracy.md measures
@@ -119,6 +121,11 @@ APPROXIMATIONS = {
                              "scale: only their split between the closures is that of normal incidence",
                              {**_one(type="fiber", roughness=0.3, thickness=0.5, orientation=[1, 0, 0]),
                               "multiple_scattering": True}),
+    "ms-merged-fiber-lobe": ("node group only: each fiber layer's GGX lobe and the network's lobe for that layer are "
+                             "one closure (colours summed, α_x mixed harmonically by the network lobe's share, about "
+                             "the single-scattering lobe's tangent)",
+                             {**_one(type="fiber", roughness=0.1, thickness=1.0, orientation=[1, 0, 0]),
+                              "multiple_scattering": True}),
     "schlick-at-view": ("Schlick F at h = flake normal, not per microfacet (node group reflection; both forms' "
                         "transmission)",
                         _one(type="surface", roughness=0.3, thickness=1e4, f0=[0.2, 0.2, 0.2])),
@@ -168,6 +175,8 @@ def approximations_used(p: model.Params) -> list[str]:
         used.add("mirror-attenuation")
     if p.multiple_scattering:
         used |= {"ms-energy", "ms-weights-at-normal", "lambert-hg", "diffusivity-exit", "scattering-share"}
+        if any(layer.type == "fiber" for layer in p.layers):
+            used.add("ms-merged-fiber-lobe")
     return [name for name in APPROXIMATIONS if name in used]
 
 
@@ -289,17 +298,20 @@ MS_ENERGY = tuple(
 
 
 def input_values(p: model.Params) -> dict:
-    """Socket name → value for these parameters (what the material's group node or script node is set to);
-    with multiple scattering, the network's prediction baked as constants."""
+    """Socket name → value of the model parameters (the baked inputs: ``baked_values``)."""
     values = {}
     for s in sockets(p):
         if s.baked:
             continue
         source = p.substrate if s.layer is None else p.layers[s.layer]
         values[s.name] = getattr(source, s.param.name)
-    if p.multiple_scattering:
-        values.update(ms_values(p))
     return values
+
+
+def baked_values(p: model.Params, form: str) -> dict:
+    """Socket name → value of the baked inputs of ``form``'s shader: with multiple scattering, the network's
+    prediction as constants and the form's own energy budget (``ms_values``)."""
+    return ms_values(p, form) if p.multiple_scattering else {}
 
 
 def with_values(p: model.Params, values: dict) -> model.Params:
@@ -312,18 +324,18 @@ def with_values(p: model.Params, values: dict) -> model.Params:
     return model.params_from_dict(data)
 
 
-def ms_values(p: model.Params) -> dict:
-    """The ``MS`` socket values: the network's prediction for light from above (addon.bake.spongecake) and the
-    energy scale that keeps the form from returning more light than it receives (``energy_values``). Cached per
-    stack and weights folder."""
+def ms_values(p: model.Params, form: str) -> dict:
+    """The ``MS`` socket values of ``form``'s shader: the network's prediction for light from above
+    (addon.bake.spongecake) and the energy budget that keeps the form from returning more light than it receives
+    (``energy_values``). Cached per stack, form and weights folder."""
     from ..bake import spongecake as bake
 
-    return dict(_ms_values(p, str(bake.WEIGHTS)))
+    return dict(_ms_values(p, form, str(bake.WEIGHTS)))
 
 
 @lru_cache(maxsize=64)
-def _ms_values(p: model.Params, weights: str) -> dict:
-    return {**_lobe_values(p), **energy_values(p)}
+def _ms_values(p: model.Params, form: str, weights: str) -> dict:
+    return {**_lobe_values(p), **energy_values(p, form)}
 
 
 def _lobe_values(p: model.Params) -> dict:
@@ -353,19 +365,21 @@ BUDGET_SUBSTEPS = 4
 VIEW_BUDGET_SUBSTEPS = (2, 2)
 
 
-def energy_values(p: model.Params) -> dict:
-    """The ``MS Energy`` inputs: the energy budget (``bake.spongecake.energy_budget``: 1 + the reference's energy
-    scale, ``reference.spongecake.energy_tables``) computed on what Cycles renders (its numpy prediction, OSL form):
-    what the form's single scattering and Dirac leave, over the albedo of its multiple-scattering closures, so that
-    the rendered furnace stays at most 1 (and is 1 less ``ENERGY_MARGIN`` for a white isotropic stack at the knots)
-    whatever the single-scattering mapping's error, even where that single scattering alone exceeds 1."""
+def energy_values(p: model.Params, form: str) -> dict:
+    """The ``MS Energy`` inputs of ``form``'s shader: the energy budget (``bake.spongecake.energy_budget``: 1 + the
+    reference's energy scale, ``reference.spongecake.energy_tables``) computed on what that form renders (its numpy
+    prediction): what the form's single scattering and Dirac leave, over the albedo of its multiple-scattering
+    closures, so that the rendered furnace stays at most 1 (and is 1 less ``ENERGY_MARGIN`` for a white isotropic
+    stack at the knots) whatever the single-scattering mapping's error, even where that single scattering alone
+    exceeds 1."""
     from ..bake.spongecake import budget_rows, energy_azimuths
 
-    scale = budget_rows(p, _left, _ms_furnace, model.ENERGY_KNOTS, energy_azimuths(p), BUDGET_SUBSTEPS).min(axis=1)
+    scale = budget_rows(p, partial(_left, form=form), partial(_ms_furnace, form=form), model.ENERGY_KNOTS,
+                        energy_azimuths(p), BUDGET_SUBSTEPS).min(axis=1)
     return {MS_PREFIX + prm.label: tuple(float(v) for v in row) for prm, row in zip(MS_ENERGY, scale)}
 
 
-def view_inputs(p: model.Params) -> dict:
+def view_inputs(p: model.Params, form: str) -> dict:
     """Inputs that the material feeds from a table over the view (socket name → ``view_table.ViewTable``): where a
     layer is oriented off the normal the energy budget depends on the view's azimuth, and the ``MS Energy`` knots (a
     budget per view cosine, the least over the azimuths) would leave the multiple scattering short by up to 70% at
@@ -375,62 +389,85 @@ def view_inputs(p: model.Params) -> dict:
         return {}
     from ..bake import spongecake as bake
 
-    table = _view_energy(p, str(bake.WEIGHTS))
+    table = _view_energy(p, form, str(bake.WEIGHTS))
     return {MS_PREFIX + prm.label: table for prm in MS_ENERGY}
 
 
 @lru_cache(maxsize=64)
-def _view_energy(p: model.Params, weights: str):
+def _view_energy(p: model.Params, form: str, weights: str):
     from ..bake.spongecake import budget_rows
     from .view_table import ViewTable
 
     rows, azimuths = model.VIEW_ENERGY_GRID
-    table = budget_rows(p, _left, _ms_furnace, rows, model.uniform_azimuths(azimuths), *VIEW_BUDGET_SUBSTEPS,
-                        cosines=model.view_table_cosines)
+    table = budget_rows(p, partial(_left, form=form), partial(_ms_furnace, form=form), rows,
+                        model.uniform_azimuths(azimuths), *VIEW_BUDGET_SUBSTEPS, cosines=model.view_table_cosines)
     return ViewTable(table, model.view_table_lowest())
 
 
-def ms_share(p: model.Params) -> float:
-    """The multiple-scattering closures' share of the energy the form sends back and through for light along the
+def ms_share(p: model.Params, form: str) -> float:
+    """The multiple-scattering closures' share of the energy ``form`` sends back and through for light along the
     normal (white furnace, mean over RGB; the Dirac counted as the material has it), from the numpy prediction."""
     normal = np.array([[0.0, 0.0, 1.0]])
-    single = replace(p, multiple_scattering=False)
-    ss = closure_furnace(lambda w: _numpy_shaded(single, input_values(single), w, shade), normal, ENERGY_QUADRATURE,
-                         SHARP_ALBEDO)
-    budget = np.asarray(ms_values(p)[MS_PREFIX + MS_ENERGY[-1].label])  # last knot: μ = 1
-    ms = _ms_furnace(p, normal) * np.maximum(budget - 1.0, 0.0)
+    ss = _part_furnace(p, normal, form, single=True)
+    budget = np.asarray(ms_values(p, form)[MS_PREFIX + MS_ENERGY[-1].label])  # last knot: μ = 1
+    ms = _ms_furnace(p, normal, form) * np.maximum(budget - 1.0, 0.0)
     total = float(np.mean(ss + ms))
     return float(np.mean(ms)) / total if total > 0.0 else 0.0
 
 
-def _left(p: model.Params, wo):
+def _left(p: model.Params, wo, form: str):
     """1 − the form's single-scattering furnace with the Dirac (rendered or not: its share is not left to MS)."""
-    lit = replace(p, multiple_scattering=False, delta_transmission=True)
-    return 1.0 - closure_furnace(lambda w: _numpy_shaded(lit, input_values(lit), w, shade), wo, ENERGY_QUADRATURE,
-                                 SHARP_ALBEDO)
+    return 1.0 - _part_furnace(replace(p, delta_transmission=True), wo, form, single=True)
 
 
-def _ms_furnace(p: model.Params, wo):
+def _ms_furnace(p: model.Params, wo, form: str):
     """Albedo (N, 3) of the form's multiple-scattering closures before the energy scale."""
-    single = replace(p, multiple_scattering=False)
-    values = {**input_values(single), **_lobe_values(p)}
-    return closure_furnace(lambda w: _numpy_shaded(p, values, w, _multiple_scattering), wo, ENERGY_QUADRATURE,
-                           SHARP_ALBEDO)
+    return _part_furnace(p, wo, form, single=False)
 
 
-def _numpy_shaded(p: model.Params, values: dict, wo, shade_with):
-    b = NumpyBackend(wo, values, "osl")
-    shade_with(b, p)
-    return b
+def _part_furnace(p: model.Params, wo, form: str, single: bool):
+    """The white furnace (N, 3) of ``form``'s single-scattering closures with the budget's share min(e, 1) = 1
+    (``single``), or of its multiple-scattering closures with max(e − 1, 0) = 1: the form's furnace is linear in
+    those two (``_scattering``)."""
+    values = {**input_values(p), **_lobe_values(p)} if p.multiple_scattering else input_values(p)
+    scales = (1.0, None) if single else (None, 1.0)
+
+    def shaded(w):
+        b = NumpyBackend(w, values, form)
+        if p.multiple_scattering:
+            _scattering(b, p, b.cos_view(), *scales)
+        else:
+            _single_scattering(b, p, b.cos_view())
+        return b
+
+    return closure_furnace(shaded, wo, ENERGY_QUADRATURE, SHARP_ALBEDO)
 
 
 def shade(b, p: model.Params) -> None:
     """Build the closure mix for the stack structure of ``p`` on backend ``b`` (see module docstring)."""
     mu = b.cos_view()
-    if p.multiple_scattering:  # the energy budget (``_energy``) scales single scattering below 1, MS above
-        budget = _energy(b, mu)
-        multiple = _EnergyScaled(b, b.maximum(budget - 1.0, (0.0, 0.0, 0.0)))
-        b = _EnergyScaled(b, b.minimum(budget, (1.0, 1.0, 1.0)))
+    if not p.multiple_scattering:
+        _single_scattering(b, p, mu)
+        return
+    budget = _energy(b, mu)  # scales single scattering below 1, multiple scattering above
+    _scattering(b, p, mu, b.minimum(budget, (1.0, 1.0, 1.0)), b.maximum(budget - 1.0, (0.0, 0.0, 0.0)))
+
+
+def _scattering(b, p: model.Params, mu, single_scale, multiple_scale) -> None:
+    """Single and multiple scattering, the colours of their closures times ``single_scale`` and ``multiple_scale``
+    (None: that part's closures are not made). In the node group each fiber layer's GGX lobe and the network's lobe
+    for it are one closure (``_FiberLobes``)."""
+    single, multiple = _EnergyScaled(b, single_scale), _EnergyScaled(b, multiple_scale)
+    fibers = any(layer.type == "fiber" for layer in p.layers)
+    lobes = _FiberLobes(b, p, single, multiple) if b.form == "nodes" and fibers else None
+    _single_scattering(lobes.single if lobes else single, p, mu)
+    _multiple_scattering(lobes.multiple if lobes else multiple, p)
+    if lobes:
+        lobes.merge()
+
+
+def _single_scattering(b, p: model.Params, mu) -> None:
+    """The layers' closures, the substrate's and the Dirac transmission's."""
     terms = _layers(b, p, mu, "")
     stack = _prod(*[t["tau"] for t in terms])
     if p.substrate is not None:
@@ -438,8 +475,6 @@ def shade(b, p: model.Params) -> None:
         shade_substrate(b, p.substrate, stack * exit_)
     if p.delta_transmission and p.substrate is None:  # every substrate blocks or refracts it (reference)
         b.transparent(b.scale((1.0, 1.0, 1.0), stack))
-    if p.multiple_scattering:
-        _multiple_scattering(multiple, p)
 
 
 def _layers(b, p: model.Params, mu, prefix: str, along_normal: bool = False, names=None) -> list[dict]:
@@ -500,7 +535,8 @@ def _energy(b, mu):
 
 
 class _EnergyScaled:
-    """A backend that passes everything to ``b`` but multiplies the colour of each closure by ``scale``."""
+    """A backend that passes everything to ``b`` but multiplies the colour of each closure by ``scale`` (None: makes
+    no closure)."""
 
     CLOSURES = ("glossy", "diffuse", "translucent", "transparent", "conductor", "dielectric")
 
@@ -511,7 +547,64 @@ class _EnergyScaled:
         attr = getattr(self._b, name)
         if name not in self.CLOSURES:
             return attr
+        if self._scale is None:
+            return lambda *args, **kw: None
         return lambda color, *args, **kw: attr(color * self._scale, *args, **kw)
+
+    def scaled(self, color):
+        """``color`` times the scale, None where there is none."""
+        return None if self._scale is None else color * self._scale
+
+
+class _GlossyRecorder:
+    """A backend that passes everything to ``b`` but records its ``glossy`` calls (what the node group's Glossy BSDF
+    gets: ``NodeBackend.glossy`` applies Schlick's F at the view) instead of making them."""
+
+    def __init__(self, b):
+        self._b, self.calls = b, []
+
+    def __getattr__(self, name):
+        return getattr(self._b, name)
+
+    def glossy(self, color, alpha_x, alpha_y, normal, tangent=None, f0=None):
+        if f0 is not None:
+            color = schlick_at_view(self._b, color, f0, normal)
+        self.calls.append((color, alpha_x, alpha_y, normal, tangent))
+
+
+class _FiberLobes:
+    """Node group with multiple scattering: each fiber layer's GGX lobe and the network's lobe for that layer become
+    one Glossy BSDF about the single-scattering lobe's tangent (one closure a fiber layer less to evaluate: the
+    cost of multiple scattering in the node group is mostly its closures, docs/training.md). Its colour is the two
+    colours' sum, each times its share of the energy budget (``single`` and ``multiple``: ``_EnergyScaled``); its
+    α_x mixes theirs harmonically by the network lobe's share s of the colours before those scales (channel means),
+    1/α_x = (1 − s)/α_x1 + s/α_x2, which keeps the weighted peak D(h = n) = 1/(π α_x α_y) of the highlight (α_y is 1
+    for both, ``_fiber_lobe``). The mix does not depend on the budget, so the node group's furnace stays linear in
+    its two shares and the budget is computed on it (``_part_furnace``). Surface-flake layers keep two closures: a
+    merged isotropic lobe lost the shape of sharp ones (docs/training.md, *Tried and reverted*).
+    [approx: ms-merged-fiber-lobe]"""
+
+    def __init__(self, b, p: model.Params, single, multiple):
+        self._b, self._scaled = b, (single, multiple)
+        self._fibers = [layer.type == "fiber" for layer in p.layers if layer.is_flake]
+        self.single, self.multiple = _GlossyRecorder(single), _GlossyRecorder(multiple)
+
+    def merge(self) -> None:
+        b, (single, multiple) = self._b, self._scaled
+        pairs = zip(self._fibers, self.single.calls, self.multiple.calls, strict=True)
+        for fiber, (c1, ax1, ay1, normal, tangent), (c2, ax2, ay2, normal2, tangent2) in pairs:
+            parts = [c for c in (single.scaled(c1), multiple.scaled(c2)) if c is not None]
+            if not fiber:  # the two lobes as they are
+                for c, ax, ay, n, t in ((single.scaled(c1), ax1, ay1, normal, tangent),
+                                        (multiple.scaled(c2), ax2, ay2, normal2, tangent2)):
+                    if c is not None:
+                        b.glossy(c, ax, ay, n, t)
+                continue
+            w2 = b.channel_mean(c2)
+            share = w2 / b.maximum(b.channel_mean(c1) + w2, 1e-12)
+            inverse = 1.0 / b.maximum(ax1, 1e-8)
+            alpha_x = 1.0 / b.multiply_add(share, 1.0 / b.maximum(ax2, 1e-8) - inverse, inverse)
+            b.glossy(parts[0] if len(parts) == 1 else parts[0] + parts[1], alpha_x, ay1, normal, tangent)
 
 
 def _slab_transmission(b, t):

@@ -94,11 +94,12 @@ def test_cycles_renders_the_prediction_for_tilted_flakes_and_fibers(name, form, 
 
 def _furnace_leak(p, form, spec):
     """Blender 4.2's extra furnace light from GGX samples below a tilted closure normal (H x W x 3)."""
+    from addon import nodes
     from addon.nodes import expr
     from addon.nodes import spongecake as mapping
 
     g = S.pixel_geometry(spec)
-    b = expr.NumpyBackend(g["wo"].reshape(-1, 3), mapping.input_values(p), form)
+    b = expr.NumpyBackend(g["wo"].reshape(-1, 3), nodes.input_values("spongecake", p, form), form)
     mapping.shade(b, p)
     return spec.environment * b.sampling_leak_blender42().reshape(g["wo"].shape)
 

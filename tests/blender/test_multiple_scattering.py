@@ -47,7 +47,7 @@ def _inputs(mat, baked):
 
 def _assert_ms_inputs_are_the_prediction(mat):
     _, p = material.current_params(mat)
-    expected = ms_values(p)
+    expected = ms_values(p, material.form_of(mat))
     got = _inputs(mat, baked=True)
     assert set(got) == set(expected)
     for name, value in expected.items():
@@ -136,7 +136,7 @@ def test_rebake_leaves_linked_inputs_alone():
     _set_thickness(mat, 3.0)
     assert material.bake_constants(mat)
     assert node.inputs["MS L1 Thickness"].default_value == 123.0
-    expected = ms_values(material.current_params(mat)[1])["MS L1 Albedo"]
+    expected = ms_values(material.current_params(mat)[1], "nodes")["MS L1 Albedo"]
     assert tuple(node.inputs["MS L1 Albedo"].default_value)[:3] == pytest.approx(expected, rel=1e-6, abs=1e-7)
 
 
@@ -146,7 +146,7 @@ def test_a_three_layer_stack_gets_multiple_scattering_through_the_grouped_networ
         assert bpy.ops.lamina.set_multiple_scattering(enabled=True) == {"FINISHED"}
     assert material.ms_enabled(mat) and not material.ms_is_stale(mat)
     p = material.current_params(mat)[1]
-    baked = {name: np.ravel(value) for name, value in ms_values(p).items()}
+    baked = {name: np.ravel(value) for name, value in ms_values(p, "nodes").items()}
     assert baked and all(np.isfinite(v).all() for v in baked.values())
     energies = [v for name, v in baked.items() if any(k in name for k in ("Albedo", "Thickness", "Reflection"))]
     assert all((v >= 0).all() for v in energies)

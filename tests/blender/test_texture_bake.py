@@ -159,7 +159,8 @@ def test_baked_maps_load_as_non_color_and_match_the_prediction_per_source_texel(
     links = _ms_links(mat)
     assert set(links) == {material.socket_key(material.shader_node(mat), s.name)
                           for s in mapping.sockets(p) if s.per_texel}
-    own = mapping.ms_values(p)  # the energy scale is the material's own, not per texel
+    form = material.form_of(mat)
+    own = mapping.ms_values(p, form)  # the energy scale is the material's own, not per texel
     node = material.shader_node(mat)
     for prm in mapping.MS_ENERGY:
         value = node.inputs[material.socket_key(node, mapping.MS_PREFIX + prm.label)].default_value
@@ -175,13 +176,13 @@ def test_baked_maps_load_as_non_color_and_match_the_prediction_per_source_texel(
         np.testing.assert_array_equal(px, exr.read_exr(bpy.path.abspath(image.filepath), "RGBA"))
         for y in range(H):
             for x in range(W):
-                want = mapping.ms_values(_params({param: _texel_value(received, y, x)}))
+                want = mapping.ms_values(_params({param: _texel_value(received, y, x)}), form)
                 expected = [np.atleast_1d(want[e[0]])[e[1]] if e else (1.0 if c == 3 else 0.0)
                             for c, e in enumerate(channels)]
                 np.testing.assert_allclose(px[y, x], expected, rtol=1e-5, atol=1e-7, err_msg=f"{name} {(x, y)}")
     # the marker texel differs from its half: a flipped map fails above
-    marker = mapping.ms_values(_params({param: _texel_value(received, 0, 0)}))
-    left = mapping.ms_values(_params({param: _texel_value(received, H - 1, 0)}))
+    marker = mapping.ms_values(_params({param: _texel_value(received, 0, 0)}), form)
+    left = mapping.ms_values(_params({param: _texel_value(received, H - 1, 0)}), form)
     assert marker != left
 
 
@@ -211,9 +212,9 @@ def _render_halves(param, form, folder, monkeypatch):
     own = {mapping.MS_PREFIX + prm.label:
            tuple(node.inputs[material.socket_key(node, mapping.MS_PREFIX + prm.label)].default_value)[:3]
            for prm in mapping.MS_ENERGY}
-    monkeypatch.setattr(mapping, "energy_values", lambda p: own)
-    views = mapping.view_inputs(material.current_params(mat)[1])
-    monkeypatch.setattr(mapping, "view_inputs", lambda p: views)
+    monkeypatch.setattr(mapping, "energy_values", lambda p, f: own)
+    views = mapping.view_inputs(material.current_params(mat)[1], form)
+    monkeypatch.setattr(mapping, "view_inputs", lambda p, f: views)
     mapping._ms_values.cache_clear()
     predicted = {half: predicted_image(model.ID, _params({param: _texel_value(received, *texel[half])}), form, spec)
                  for half in halves}
@@ -294,7 +295,7 @@ def test_without_textures_the_bake_writes_the_constants_and_removes_an_old_bake(
     assert "nothing to bake" in summary
     assert texture_wiring.baked_nodes(mat) == [] and _ms_links(mat) == {}
     node = material.shader_node(mat)
-    for name, value in mapping.ms_values(material.current_params(mat)[1]).items():
+    for name, value in mapping.ms_values(material.current_params(mat)[1], material.form_of(mat)).items():
         np.testing.assert_allclose(np.atleast_1d(node.inputs[name].default_value)[:np.size(value)],
                                    np.atleast_1d(value), rtol=1e-5)
 

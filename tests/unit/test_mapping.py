@@ -4,6 +4,7 @@ import pytest
 
 from addon import presets
 from addon.models import spongecake as model
+from addon import nodes
 from addon.nodes import closures_np, expr
 from addon.nodes import spongecake as mapping
 
@@ -16,7 +17,7 @@ def _dirs(n, seed, lower=False):
 
 
 def _predict(p, wi, wo, form="osl"):
-    b = expr.NumpyBackend(wo, mapping.input_values(p), form=form)
+    b = expr.NumpyBackend(wo, nodes.input_values(model.ID, p, form), form=form)
     mapping.shade(b, p)
     return b.evaluate(wi), b
 
@@ -240,7 +241,7 @@ def test_multiple_scattering_closures_follow_the_view_only_through_the_energy_sc
 
     p = replace(model.params_from_dict(presets.load(model.ID, name)), multiple_scattering=True)
     wo = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8], [0.0, 0.98, 0.199], [0.4, -0.3, -0.866]])
-    b = expr.NumpyBackend(wo, mapping.input_values(p), form="osl")
+    b = expr.NumpyBackend(wo, nodes.input_values(model.ID, p, "osl"), form="osl")
     mapping._multiple_scattering(b, p)
     assert len(b.closures) >= 2
     for kind, color, _ in b.closures:
@@ -256,8 +257,7 @@ def test_with_view_independent_weights_a_white_stack_still_returns_what_it_recei
         "multiple_scattering": True, "delta_transmission": True})
     mu = np.asarray(model.energy_cosines())[[2, 5, 7]]
     views = np.stack([np.sqrt(1.0 - mu * mu), 0.0 * mu, mu], axis=1)
-    furnace = expr.closure_furnace(lambda w: mapping._numpy_shaded(white, mapping.input_values(white), w,
-                                                                  mapping.shade),
+    furnace = expr.closure_furnace(lambda w: nodes._backend(model.ID, white, "osl", w),
                                    views, mapping.ENERGY_QUADRATURE, closures_np.SHARP_ALBEDO)
     np.testing.assert_allclose(furnace, 1.0 - model.ENERGY_MARGIN, atol=2e-3)
 
@@ -281,3 +281,33 @@ def test_the_furnace_reuses_each_views_closures_exactly(views):
     regridded = directional_albedo(lambda wi, w: backend_at(w).evaluate(wi), wo, (16, 32))
     reused = expr.closure_furnace(backend_at, wo, (16, 32), quadratures={})
     np.testing.assert_allclose(reused, regridded, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("name, merged", [("fabric", 1), ("window_shade", 2)])
+def test_the_node_group_makes_one_closure_of_each_fiber_layers_two_lobes(name, merged):
+    """[ms-merged-fiber-lobe]: in the node group a fiber layer's GGX lobe and the network's lobe for it are one
+    Glossy BSDF whose colour is the sum of OSL's two and whose α_x keeps their weighted peak, Σ c / α_x (energy
+    inputs 2: both shares of the budget 1, so the colours are the unscaled ones the mix is computed from)."""
+    from dataclasses import replace
+
+    p = replace(model.params_from_dict(presets.load(model.ID, name)), multiple_scattering=True)
+    values = {**nodes.input_values(model.ID, p, "osl"), **{mapping.MS_PREFIX + prm.label: (2.0, 2.0, 2.0)
+                                                           for prm in mapping.MS_ENERGY}}
+    wo = _dirs(6, 7)
+    lobes = {}
+    for form in ("osl", "nodes"):
+        b = expr.NumpyBackend(wo, values, form=form)
+        mapping.shade(b, p)
+        lobes[form] = [(color, kw) for kind, color, kw in b.closures if kind == "ggx"]
+    assert len(lobes["osl"]) - len(lobes["nodes"]) == merged
+    flakes = [layer for layer in p.layers if layer.is_flake]
+    osl_single, osl_multiple = lobes["osl"][:len(flakes)], lobes["osl"][len(flakes):]
+    fibers = [k for k, layer in enumerate(flakes) if layer.type == "fiber"]
+    one = [(color, kw) for color, kw in lobes["nodes"] if np.all(kw["alpha_y"] == 1.0)]
+    assert len(one) == len(fibers)
+    for k, (color, kw) in zip(fibers, one):
+        (c1, kw1), (c2, kw2) = osl_single[k], osl_multiple[k]
+        np.testing.assert_allclose(color, c1 + c2, rtol=1e-9)
+        peak = c1.mean(axis=1) / kw1["alpha_x"] + c2.mean(axis=1) / kw2["alpha_x"]
+        np.testing.assert_allclose(color.mean(axis=1) / kw["alpha_x"], peak, rtol=1e-9)
+        np.testing.assert_allclose(kw["tangent"], kw1["tangent"], rtol=1e-12)

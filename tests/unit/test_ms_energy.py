@@ -112,17 +112,19 @@ def test_cycles_forms_white_furnace_is_one(form, name):
     assert a.max() <= 1.02
 
 
+@pytest.mark.parametrize("form", ["osl", "nodes"])
 @pytest.mark.parametrize("name", list(OTHERS))
-def test_cycles_forms_never_gain_energy(name):
+def test_cycles_forms_never_gain_energy(name, form):
     p = _params(OTHERS[name])
-    a = _form_furnace(p, "osl", _views(9, 9, (1.0,)))
+    a = _form_furnace(p, form, _views(9, 9, (1.0,)))
     assert np.all(np.isfinite(a)) and a.min() >= 0.0
     assert a.max() <= 1.02, a.max(axis=1)
 
 
-def test_energy_inputs_are_the_forms_scale():
+@pytest.mark.parametrize("form", ["osl", "nodes"])
+def test_energy_inputs_are_the_forms_scale(form):
     p = _params({"layers": WHITE["back-scattering medium"]})
-    values = mapping.ms_values(p)
+    values = mapping.ms_values(p, form)
     energy = [values[mapping.MS_PREFIX + prm.label] for prm in mapping.MS_ENERGY]
     assert len(energy) == model.ENERGY_KNOTS
     assert np.all(np.isfinite(energy)) and np.min(energy) >= 1.0  # a budget: 1 + the scale (here nothing is capped)
@@ -250,12 +252,13 @@ def _bilinear(table, u, phi):
     {"type": "hg", "roughness": -0.999, "thickness": 1.0},
     {"type": "fiber", "roughness": 1e-4, "thickness": 1e4, "orientation": [1, 0, 0]},
 ])
-def test_extremes_give_finite_non_negative_scales(layer):
+@pytest.mark.parametrize("form", ["osl", "nodes"])
+def test_extremes_give_finite_non_negative_scales(layer, form):
     p = _params({"layers": [{"albedo": [1, 1, 1], **layer}]})
     above, below = ref.energy_tables(p)
     assert np.all(np.isfinite(above)) and np.all(np.isfinite(below))
     assert above.min() >= 0.0 and below.min() >= 0.0
-    values = mapping.ms_values(p)
+    values = mapping.ms_values(p, form)
     energy = np.array([values[mapping.MS_PREFIX + prm.label] for prm in mapping.MS_ENERGY])
     assert np.all(np.isfinite(energy)) and energy.min() >= 0.0
 
@@ -289,12 +292,13 @@ def test_the_cycles_forms_follow_the_azimuth_of_oriented_stacks(form, monkeypatc
     wo = spherical(np.cos(np.radians(rng.uniform(0.0, 85.0, 48))), rng.uniform(0.0, 2.0 * np.pi, 48))
     a = _form_furnace(p, form, wo)
     assert np.mean(np.abs(a - 1.0)) <= 0.008 and a.max() <= 1.015, a[:, 0]
-    monkeypatch.setattr(mapping, "view_inputs", lambda q: {})
+    monkeypatch.setattr(mapping, "view_inputs", lambda q, f: {})
     knots = _form_furnace(p, form, wo)
     assert np.mean(np.abs(knots - 1.0)) > 0.025, knots[:, 0]
 
 
 def test_isotropic_stacks_feed_no_input_from_a_view_table():
-    assert mapping.view_inputs(_params({"layers": WHITE["four layers"]})) == {}
-    assert mapping.view_inputs(replace(_params(OTHERS["tilted flakes over in-plane fibers"]),
-                                       multiple_scattering=False)) == {}
+    for form in ("osl", "nodes"):
+        assert mapping.view_inputs(_params({"layers": WHITE["four layers"]}), form) == {}
+        assert mapping.view_inputs(replace(_params(OTHERS["tilted flakes over in-plane fibers"]),
+                                           multiple_scattering=False), form) == {}
