@@ -105,7 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
     bn.add_argument("--ms-stride", type=int, default=3, help="its Monte Carlo runs at every n-th row and column")
     bn.add_argument("--ms-furnace-configs", type=int, default=6, help="random white-furnace stacks per layer count")
     bn.add_argument("--ms-failure-paths", type=int, default=4000, help="paths per wi for the low-roughness fibers")
-    bn.add_argument("--ms-repeats", type=int, default=3, help="renders per timing (the fastest counts)")
+    bn.add_argument("--ms-repeats", type=int, default=5, help="renders per timing (the fastest counts)")
     bn.add_argument("--ms-bake-size", type=int, default=512, help="texture side for the bake timing")
     bk = sub.add_parser("bake", help="bake a Lamina material's multiple scattering (per texel where Image Textures "
                                      "drive its layers) and save the .blend")

@@ -179,7 +179,7 @@ class MsSizes:
     furnace_paths: int = 20000  # random-walk paths per wo (ground-truth albedo)
     presets: tuple = ("fabric", "window_shade")
     truth: object = None  # spongecake_truth.TruthSettings of the rendered comparison (None: RENDER_TRUTH)
-    speed_repeats: int = 3
+    speed_repeats: int = 5
     bake_size: int = 512  # texels per side of the synthetic texture for bake timing
     seed: int = 7
 
@@ -476,7 +476,8 @@ def bake_throughput(size: int) -> tuple[str, float]:
 
 def ms_render_times(names, samples: int, resolution: int, repeats: int) -> list[dict]:
     """Cycles render time of each preset with and without multiple scattering, both forms, on the sphere scene;
-    the renders alternate (SS, SS + MS, ...) and the fastest of ``repeats`` counts."""
+    the renders alternate (SS, SS + MS, ...) and the fastest of ``repeats`` counts; ``<form>_rounds`` holds each
+    round's ratio SS + MS over SS (their spread is the measurement's)."""
     import bpy
 
     from ..nodes import material as lamina_material
@@ -499,7 +500,9 @@ def ms_render_times(names, samples: int, resolution: int, repeats: int) -> list[
                     times[k].append(render_cycles(mat, spec, samples, 0, path)[1])
         finally:
             blend_io.remove_new_data(before)
-        rows.append({"preset": name, **{f"{form}{'_ms' if ms else ''}": min(t) for (form, ms), t in times.items()}})
+        rows.append({"preset": name, **{f"{form}{'_ms' if ms else ''}": min(t) for (form, ms), t in times.items()},
+                     **{f"{form}_rounds": [m / s for s, m in zip(times[form, False], times[form, True])]
+                        for form in ("nodes", "osl")}})
     return rows
 
 
@@ -640,12 +643,18 @@ def ms_speed_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
     what, per_mp = bake_throughput(sizes.bake_size)
     lines = ["", "## Multiple scattering", "",
              f"Cycles CPU render of the sphere scene, {resolution}×{resolution} px, {samples} samples, the same "
-             f"material with multiple scattering off and on, renders alternating, fastest of {sizes.speed_repeats}. "
-             "Goal: SS + MS ≤ 1.5× SS (the paper reports 1.44×).", "",
-             "| preset | node group SS s | SS + MS s | ratio | OSL SS s | SS + MS s | ratio |",
-             "|---|---|---|---|---|---|---|"]
+             f"material with multiple scattering off and on, renders alternating, fastest of {sizes.speed_repeats}; "
+             "the ratio of the fastest renders, and the range of the ratios of each round's pair (how far one "
+             "measurement of this ratio moves on this machine). Goal: SS + MS ≤ 1.5× SS (the paper reports 1.44×).", "",
+             "| preset | node group SS s | SS + MS s | ratio | per round | OSL SS s | SS + MS s | ratio | per round |",
+             "|---|---|---|---|---|---|---|---|---|"]
+
+    def spread(ratios):
+        return f"{min(ratios):.2f}–{max(ratios):.2f}"
+
     for r in rows:
         lines.append(f"| {r['preset']} | {r['nodes']:.2f} | {r['nodes_ms']:.2f} | {r['nodes_ms'] / r['nodes']:.2f} | "
-                     f"{r['osl']:.2f} | {r['osl_ms']:.2f} | {r['osl_ms'] / r['osl']:.2f} |")
+                     f"{spread(r['nodes_rounds'])} | {r['osl']:.2f} | {r['osl_ms']:.2f} | {r['osl_ms'] / r['osl']:.2f} | "
+                     f"{spread(r['osl_rounds'])} |")
     lines += ["", f"Baking multiple scattering into textures: **{per_mp:.2f} s per megapixel** ({what}; fastest of 2)."]
     return "\n".join(lines) + "\n"

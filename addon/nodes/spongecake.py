@@ -592,19 +592,26 @@ class _FiberLobes:
     def merge(self) -> None:
         b, (single, multiple) = self._b, self._scaled
         pairs = zip(self._fibers, self.single.calls, self.multiple.calls, strict=True)
-        for fiber, (c1, ax1, ay1, normal, tangent), (c2, ax2, ay2, normal2, tangent2) in pairs:
-            parts = [c for c in (single.scaled(c1), multiple.scaled(c2)) if c is not None]
-            if not fiber:  # the two lobes as they are
-                for c, ax, ay, n, t in ((single.scaled(c1), ax1, ay1, normal, tangent),
-                                        (multiple.scaled(c2), ax2, ay2, normal2, tangent2)):
-                    if c is not None:
-                        b.glossy(c, ax, ay, n, t)
-                continue
-            w2 = b.channel_mean(c2)
-            share = w2 / b.maximum(b.channel_mean(c1) + w2, 1e-12)
-            inverse = 1.0 / b.maximum(ax1, 1e-8)
-            alpha_x = 1.0 / b.multiply_add(share, 1.0 / b.maximum(ax2, 1e-8) - inverse, inverse)
-            b.glossy(parts[0] if len(parts) == 1 else parts[0] + parts[1], alpha_x, ay1, normal, tangent)
+        for fiber, (c1, *lobe1), (c2, *lobe2) in pairs:
+            colors = single.scaled(c1), multiple.scaled(c2)
+            if fiber:
+                present = [c for c in colors if c is not None]
+                lobes = [(present[0] if len(present) == 1 else present[0] + present[1],
+                          *_merged_fiber_lobe(b, c1, c2, lobe1, lobe2))]
+            else:  # the two lobes as they are
+                lobes = [(colors[0], *lobe1), (colors[1], *lobe2)]
+            for color, *lobe in lobes:
+                if color is not None:
+                    b.glossy(color, *lobe)
+
+
+def _merged_fiber_lobe(b, c1, c2, lobe1, lobe2) -> tuple:
+    """(α_x, α_y, normal, tangent) of the one lobe for two fiber lobes of colours c1, c2 (``_FiberLobes``)."""
+    (ax1, ay1, normal, tangent), (ax2, *_) = lobe1, lobe2
+    w2 = b.channel_mean(c2)
+    share = w2 / b.maximum(b.channel_mean(c1) + w2, 1e-12)
+    inverse = 1.0 / b.maximum(ax1, 1e-8)
+    return 1.0 / b.multiply_add(share, 1.0 / b.maximum(ax2, 1e-8) - inverse, inverse), ay1, normal, tangent
 
 
 def _slab_transmission(b, t):
