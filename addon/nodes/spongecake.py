@@ -428,16 +428,15 @@ def _ms_furnace(p: model.Params, wo, form: str):
 def _part_furnace(p: model.Params, wo, form: str, single: bool):
     """The white furnace (N, 3) of ``form``'s single-scattering closures with the budget's share min(e, 1) = 1
     (``single``), or of its multiple-scattering closures with max(e − 1, 0) = 1: the form's furnace is linear in
-    those two (``_scattering``)."""
-    values = {**input_values(p), **_lobe_values(p)} if p.multiple_scattering else input_values(p)
+    those two (``_scattering``). ``p`` is shaded with multiple scattering whether or not it has it (the budget's
+    white stack, ``model.white``, has not)."""
+    p = replace(p, multiple_scattering=True)
+    values = {**input_values(p), **_lobe_values(p)}
     scales = (1.0, None) if single else (None, 1.0)
 
     def shaded(w):
         b = NumpyBackend(w, values, form)
-        if p.multiple_scattering:
-            _scattering(b, p, b.cos_view(), *scales)
-        else:
-            _single_scattering(b, p, b.cos_view())
+        _scattering(b, p, b.cos_view(), *scales)
         return b
 
     return closure_furnace(shaded, wo, ENERGY_QUADRATURE, SHARP_ALBEDO)

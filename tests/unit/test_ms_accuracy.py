@@ -74,10 +74,12 @@ def test_white_furnace_configs_are_seeded_and_non_absorbing():
 def test_the_dense_furnace_sees_oriented_stacks_at_every_azimuth():
     sizes = bench.MsSizes(furnace_configs=1)
     oriented = [model.anisotropic(model.params_from_dict(c)) for c in bench.white_furnace_configs(1, sizes.seed)]
-    a = bench.dense_cycles_furnace(sizes)
     views = sum(bench.DENSE_AZIMUTHS if o else 1 for o in oriented) * len(bench.DENSE_THETAS)
-    assert any(oriented) and a.shape == (views,)
-    assert np.all(np.isfinite(a)) and a.min() > 0.5 and a.max() < 1.5  # coarse tables: a measuring-code test
+    assert any(oriented)
+    for form in ("osl", "nodes"):
+        a = bench.dense_cycles_furnace(sizes, form)
+        assert a.shape == (views,)
+        assert np.all(np.isfinite(a)) and a.min() > 0.5 and a.max() < 1.5  # coarse tables: a measuring-code test
 
 
 @pytest.mark.usefixtures("coarse_energy_tables")
@@ -95,8 +97,9 @@ def test_white_furnace_truth_is_one_and_single_scattering_falls_short():
     assert s["ss"]["mean_vs_1"] == pytest.approx(np.mean(np.abs(1 - single)))
     assert s["truth"]["worst_vs_1"] == pytest.approx(np.max(np.abs(1 - truth)))
     assert s["ss_ms"]["worst_vs_truth"] >= s["ss_ms"]["mean_vs_truth"] >= 0
-    cycles = np.array([r["cycles"] for r in rows])
-    assert np.all(np.isfinite(cycles)) and s["cycles"]["max"] == pytest.approx(cycles.max())
+    for form in ("cycles", "nodes"):
+        cycles = np.array([r[form] for r in rows])
+        assert np.all(np.isfinite(cycles)) and s[form]["max"] == pytest.approx(cycles.max())
     network = np.array([r["network"] for r in rows])  # SS + the network's lobes before the energy scale
     assert np.all(network >= single - 1e-12) and s["network"]["max"] == pytest.approx(network.max())
 

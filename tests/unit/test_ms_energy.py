@@ -302,3 +302,17 @@ def test_isotropic_stacks_feed_no_input_from_a_view_table():
         assert mapping.view_inputs(_params({"layers": WHITE["four layers"]}), form) == {}
         assert mapping.view_inputs(replace(_params(OTHERS["tilted flakes over in-plane fibers"]),
                                            multiple_scattering=False), form) == {}
+
+
+@pytest.mark.parametrize("form", ["osl", "nodes"])
+def test_the_budgets_white_stack_is_shaded_with_its_multiple_scattering(form):
+    """``energy_grid`` limits a nearly white stack by its white stack (``model.white``, multiple scattering off):
+    the form's multiple-scattering albedo of that stack is still its multiple-scattering closures', not its single
+    scattering (which an earlier version returned, raising window_shade's budget by up to 0.19)."""
+    p = _params(OTHERS["absorbing flakes over a medium"])
+    white = model.white(p)
+    assert not white.multiple_scattering
+    wo = _views(4, 3, (1.0,))
+    lobes = mapping._ms_furnace(white, wo, form)
+    np.testing.assert_allclose(lobes, mapping._ms_furnace(replace(white, multiple_scattering=True), wo, form))
+    assert not np.allclose(lobes, 1.0 - mapping._left(white, wo, form), rtol=0.05)
