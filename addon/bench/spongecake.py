@@ -475,9 +475,13 @@ def bake_throughput(size: int) -> tuple[str, float]:
 
 
 def ms_render_times(names, samples: int, resolution: int, repeats: int) -> list[dict]:
-    """Cycles render time of each preset with and without multiple scattering, both forms, on the sphere scene;
-    the renders alternate (SS, SS + MS, ...) and the fastest of ``repeats`` counts; ``<form>_rounds`` holds each
-    round's ratio SS + MS over SS (their spread is the measurement's)."""
+    """Cycles render time of each preset with and without multiple scattering, both forms, on the sphere scene, at
+    ``samples`` and at twice as many; the renders alternate (SS, SS + MS, ...) and the fastest of ``repeats`` counts.
+    ``<form>`` / ``<form>_ms``: the whole render at ``samples`` (scene sync, shader compilation, kernel set-up and
+    sampling); ``<form>_sampling`` / ``<form>_ms_sampling``: the fastest render at twice the samples less the fastest
+    at ``samples``, the time of ``samples`` samples alone (what shading costs: the set-up is the same in both and
+    cancels). ``<form>_rounds`` / ``<form>_sampling_rounds`` hold each round's ratio SS + MS over SS (their spread is
+    the measurement's)."""
     import bpy
 
     from ..nodes import material as lamina_material
@@ -486,6 +490,7 @@ def ms_render_times(names, samples: int, resolution: int, repeats: int) -> list[
 
     spec = ref_scenes.sphere_scene(resolution=resolution)
     path = os.path.join(bpy.app.tempdir, "bench_ms.exr")
+    counts = (samples, 2 * samples)
     rows = []
     for name in names:
         data = presets.load(MODEL, name)
@@ -494,15 +499,24 @@ def ms_render_times(names, samples: int, resolution: int, repeats: int) -> list[
             mats = {(form, ms): lamina_material.new_material(
                         MODEL, model.params_from_dict({**data, "multiple_scattering": ms}), form)
                     for form in ("nodes", "osl") for ms in (False, True)}
-            times = {k: [] for k in mats}
+            times = {(k, n): [] for k in mats for n in counts}
             for _ in range(repeats):
                 for k, mat in mats.items():
-                    times[k].append(render_cycles(mat, spec, samples, 0, path)[1])
+                    for n in counts:
+                        times[k, n].append(render_cycles(mat, spec, n, 0, path)[1])
         finally:
             blend_io.remove_new_data(before)
-        rows.append({"preset": name, **{f"{form}{'_ms' if ms else ''}": min(t) for (form, ms), t in times.items()},
-                     **{f"{form}_rounds": [m / s for s, m in zip(times[form, False], times[form, True])]
-                        for form in ("nodes", "osl")}})
+        whole = {k: times[k, samples] for k in mats}
+        sampling = {k: [b - a for a, b in zip(times[k, samples], times[k, 2 * samples])] for k in mats}
+        row = {"preset": name}
+        for form in ("nodes", "osl"):
+            for ms, suffix in ((False, ""), (True, "_ms")):
+                row[form + suffix] = min(whole[form, ms])
+                row[form + suffix + "_sampling"] = min(times[(form, ms), 2 * samples]) - min(whole[form, ms])
+            row[form + "_rounds"] = [m / s for s, m in zip(whole[form, False], whole[form, True])]
+            row[form + "_sampling_rounds"] = [m / s for s, m in zip(sampling[form, False], sampling[form, True])
+                                              if s > 0.0]
+        rows.append(row)
     return rows
 
 
@@ -642,19 +656,28 @@ def ms_speed_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
     rows = ms_render_times(sizes.presets, samples, resolution, sizes.speed_repeats)
     what, per_mp = bake_throughput(sizes.bake_size)
     lines = ["", "## Multiple scattering", "",
-             f"Cycles CPU render of the sphere scene, {resolution}×{resolution} px, {samples} samples, the same "
-             f"material with multiple scattering off and on, renders alternating, fastest of {sizes.speed_repeats}; "
-             "the ratio of the fastest renders, and the range of the ratios of each round's pair (how far one "
-             "measurement of this ratio moves on this machine). Goal: SS + MS ≤ 1.5× SS (the paper reports 1.44×).", "",
+             f"Cycles CPU render of the sphere scene, {resolution}×{resolution} px, the same material with multiple "
+             f"scattering off and on, renders alternating, fastest of {sizes.speed_repeats}; the ratio of the fastest "
+             "renders, and the range of the ratios of each round's pair (how far one measurement of this ratio moves "
+             "on this machine). Goal: SS + MS ≤ 1.5× SS (the paper reports 1.44×).", "",
+             f"Whole render at {samples} samples (scene sync, shader compilation, kernel set-up and sampling):", "",
              "| preset | node group SS s | SS + MS s | ratio | per round | OSL SS s | SS + MS s | ratio | per round |",
              "|---|---|---|---|---|---|---|---|---|"]
-
-    def spread(ratios):
-        return f"{min(ratios):.2f}–{max(ratios):.2f}"
-
-    for r in rows:
-        lines.append(f"| {r['preset']} | {r['nodes']:.2f} | {r['nodes_ms']:.2f} | {r['nodes_ms'] / r['nodes']:.2f} | "
-                     f"{spread(r['nodes_rounds'])} | {r['osl']:.2f} | {r['osl_ms']:.2f} | {r['osl_ms'] / r['osl']:.2f} | "
-                     f"{spread(r['osl_rounds'])} |")
+    lines += [_speed_row(r, "") for r in rows]
+    lines += ["", f"Sampling alone: the time of {samples} samples, the fastest render at {2 * samples} samples less the "
+              f"fastest at {samples} (the set-up is the same in both and cancels; what shading the material costs):", "",
+              "| preset | node group SS s | SS + MS s | ratio | per round | OSL SS s | SS + MS s | ratio | per round |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    lines += [_speed_row(r, "_sampling") for r in rows]
     lines += ["", f"Baking multiple scattering into textures: **{per_mp:.2f} s per megapixel** ({what}; fastest of 2)."]
     return "\n".join(lines) + "\n"
+
+
+def _speed_row(r: dict, kind: str) -> str:
+    """One preset's row of ``ms_speed_markdown``: ``kind`` "" (whole renders) or "_sampling"."""
+    cells = [r["preset"]]
+    for form in ("nodes", "osl"):
+        ss, ms, rounds = r[form + kind], r[form + "_ms" + kind], r[form + kind + "_rounds"]
+        spread = f"{min(rounds):.2f}–{max(rounds):.2f}" if rounds else "–"
+        cells += [f"{ss:.2f}", f"{ms:.2f}", f"{ms / ss:.2f}" if ss > 0.0 else "–", spread]
+    return "| " + " | ".join(cells) + " |"

@@ -548,7 +548,7 @@ class _EnergyScaled:
             return attr
         if self._scale is None:
             return lambda *args, **kw: None
-        return lambda color, *args, **kw: attr(color * self._scale, *args, **kw)
+        return lambda color, *args, **kw: attr(self.scaled(color), *args, **kw)
 
     def scaled(self, color):
         """``color`` times the scale, None where there is none."""
