@@ -66,10 +66,11 @@ ALPHA_RANGE = (0.01, 1.0)
 G_MAX = 0.95
 THICKNESS_IN = (0.01, 10.0)
 THICKNESS_OUT = (0.01, 20.0)
-MS_VERSION = 8  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
+MS_VERSION = 9  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
 # stack's scale over the view's azimuth too (``nodes.spongecake.view_inputs``), 5 the energy budget (``energy_budget``),
 # 6 its view tables made safe along the view cosine too (``budget_rows``), 7 the forward lobe (``decode``), 8 each
-# form's budget on its own prediction (the node group's merged fiber lobes: ``nodes.spongecake._FiberLobes``)
+# form's budget on its own prediction (the node group's merged fiber lobes: ``nodes.spongecake._FiberLobes``), 9 one
+# ``MS Energy`` input fed from a view table for every stack (``nodes.spongecake.energy_table``)
 NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 
@@ -322,17 +323,17 @@ def whiteness_of(params: model.Params) -> np.ndarray:
 
 
 def budget_rows(params: model.Params, left_of, lobes_of, rows: int, phi, substeps: int,
-                phi_substeps: int = 1, cosines=model.energy_cosines) -> np.ndarray:
-    """The Cycles forms' energy budget (``energy_budget``; rows, len(phi), 3) on the view cosines ``cosines(rows)``
-    (the knots' ``models.spongecake.energy_cosines``, uniform in √μ, or the view tables' ``view_table_cosines``) and
-    the azimuths ``phi`` (uniform over the circle from 0 where there are several), interpolated linearly between them
-    and made safe between them (``safe_between``), computed ``substeps`` times finer along the rows' coordinate.
-    With ``phi_substeps`` 1 (the knots of isotropic stacks, whose budget is smooth) the rows are lowered only where
-    the budget caps single scattering. With ``phi_substeps`` > 1 (the view tables of oriented stacks) the budget is
-    as many times finer in the azimuth too, and rows and columns are lowered wherever interpolation would return
-    more light than the finer budget by ``SAFE_TOLERANCE`` (``furnace_weights``): a tilted closure normal that
-    Cycles bends makes the budget leap within a few degrees, near the normal view as well as near grazing."""
-    fine_mu = np.asarray(cosines((rows - 1) * substeps + 1))
+                phi_substeps: int = 1) -> np.ndarray:
+    """The Cycles forms' energy budget (``energy_budget``; rows, len(phi), 3) on the view tables' cosines
+    (``models.spongecake.view_table_cosines(rows)``) and the azimuths ``phi`` (uniform over the circle from 0 where
+    there are several), interpolated linearly between them and made safe between them (``safe_between``), computed
+    ``substeps`` times finer along the rows' coordinate. With ``phi_substeps`` 1 (isotropic stacks, whose budget is
+    smooth; one azimuth) the rows are lowered only where the budget caps single scattering. With ``phi_substeps`` > 1
+    (oriented stacks) the budget is as many times finer in the azimuth too, and rows and columns are lowered wherever
+    interpolation would return more light than the finer budget by ``SAFE_TOLERANCE`` (``furnace_weights``): a tilted
+    closure normal that Cycles bends makes the budget leap within a few degrees, near the normal view as well as near
+    grazing."""
+    fine_mu = np.asarray(model.view_table_cosines((rows - 1) * substeps + 1))
     phi = np.asarray(phi, dtype=np.float64)
     if phi_substeps == 1:
         return safe_between(energy_grid(params, left_of, lobes_of, fine_mu, phi, scale_of=energy_budget), substeps)

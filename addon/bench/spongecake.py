@@ -618,8 +618,8 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "at its knots; where a layer is oriented off the normal the reference tabulates the scale over the "
               "view's azimuth too. Between the knots the reference interpolates bilinearly less an estimate of the "
               "interpolation's error where the table is convex, so that a view between knots takes no more than "
-              "they allow. The Cycles forms interpolate linearly in √μ; for an oriented stack they look the scale up "
-              "in a table over asin(√μ) and the azimuth (a packed float image, bilinear) without that estimate; an "
+              "they allow. The Cycles forms look the scale up in a table over asin(√μ), and the azimuth for an "
+              "oriented stack (a packed float image, bilinear), without that estimate; an "
               "energy budget (training.md) caps their single scattering where it alone returns more than it "
               "receives, and the tables are lowered where interpolating between their knots would exceed them."]
     dense = {form: dense_cycles_furnace(sizes, form) for form in ("osl", "nodes")}

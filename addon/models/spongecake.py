@@ -21,14 +21,15 @@ SUBSTRATE_TYPES = ("none", "diffuse", "conductor", "dielectric")
 # Optical thickness (Tρ summed over the stack) beyond which no light crosses it: e^-30 ≈ 1e-13 along the normal,
 # and flakes along the normal or fibers in the tangent plane are at least as thick along every other direction.
 OPAQUE_THICKNESS = 30.0
-# Multiple scattering's energy scale (reference ``energy_tables``, Cycles forms' ``MS Energy`` inputs): a table over
+# Multiple scattering's energy scale in the reference (``energy_tables``): a table over
 # the view cosine on ENERGY_KNOTS knots uniform in √μ from MIN_ENERGY_COS to 1 (dense near grazing, where the scale
 # changes fastest; views closer to grazing take the first knot's value).
 ENERGY_KNOTS = 8
 MIN_ENERGY_COS = 0.02
 ENERGY_AZIMUTHS = 32  # view azimuths per knot where a layer is oriented off the normal (``energy_tables``)
-# The Cycles forms' table of an oriented stack's scale (``nodes.spongecake.view_inputs``): rows uniform in √μ from
-# MIN_ENERGY_COS to 1 by azimuths, looked up bilinearly as a float image (``nodes.view_table``).
+# The Cycles forms' table of the energy budget (``nodes.spongecake.energy_table``): rows uniform in asin(√μ) from
+# MIN_ENERGY_COS to 1 by azimuths (``view_energy_grid``: one where no layer is oriented off the normal), looked up
+# bilinearly as a float image (``nodes.view_table``).
 VIEW_ENERGY_GRID = (32, 64)
 # The share of the received light the scale leaves unreturned (``bake.spongecake.energy_scale``): twice the largest
 # standard deviation (0.16%) of the tables' 4096-sample estimates of what single scattering leaves, measured over the
@@ -207,6 +208,13 @@ def view_table_cosines(count: int):
 def view_table_lowest() -> float:
     """asin(√μ) of the view tables' first row: the energy tables' first knot."""
     return math.asin(MIN_ENERGY_COS ** 0.5)
+
+
+def view_energy_grid(params: Params) -> tuple[int, int]:
+    """(rows, azimuths) of the Cycles forms' energy table of ``params``: ``VIEW_ENERGY_GRID`` where a layer is
+    oriented off the normal, else its rows of one azimuth."""
+    rows, azimuths = VIEW_ENERGY_GRID
+    return rows, azimuths if anisotropic(params) else 1
 
 
 def uniform_azimuths(count: int):

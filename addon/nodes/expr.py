@@ -422,9 +422,6 @@ class OslBackend:
     def multiply_add(self, a, s, c):
         return self._let(_osl(a) * s + c)
 
-    def mix_clamped(self, a, b, t):
-        return self._let(OslValue(f"mix({_osl(a).code}, {_osl(b).code}, clamp({_osl(t).code}, 0.0, 1.0))", "color"))
-
     def channel(self, color, i: int):
         c = self._let(_osl(color), "color")
         return self._let(OslValue(f"{c.code}[{i}]", "float"))

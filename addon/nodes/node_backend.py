@@ -8,7 +8,7 @@ import bpy
 from .expr import (BULK_INPUT, MAX_CONDUCTOR_WEIGHT, MAX_MIX_WEIGHT, METAL_MIN_RATIO, MIN_COS, MIN_LOG, MIN_TANGENT,
                    lobe_fresnel, schlick_at_view)
 
-GENERATOR_VERSION = 7  # bump when generated shaders change, so cached groups are not reused
+GENERATOR_VERSION = 8  # bump when generated shaders change, so cached groups are not reused
 COLUMN = 190
 ROW = 150
 
@@ -273,15 +273,6 @@ class NodeBackend:
         if "color" in (_kind(a), _kind(c)):
             return self._vector("MULTIPLY_ADD", _as_color(a), s, _as_color(c))
         return self._math("MULTIPLY_ADD", a, s, c)
-
-    def mix_clamped(self, a, b, t):
-        """``NumpyMath.mix_clamped`` in one Mix node (vector data, factor clamped)."""
-        depth = _depth(a, b, t)
-        mix = self._node("ShaderNodeMix", depth, data_type="VECTOR", clamp_factor=True)
-        self._link_or_set(t, mix.inputs["Factor"])
-        self._link_or_set(_as_color(a), mix.inputs[4])  # A (vector)
-        self._link_or_set(_as_color(b), mix.inputs[5])  # B (vector)
-        return NodeValue(self, mix.outputs[1], "color", depth)
 
     def channel(self, color, i: int):
         sep = self._node("ShaderNodeSeparateXYZ", _depth(color))

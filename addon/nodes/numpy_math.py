@@ -27,12 +27,6 @@ class NumpyMath:
         return a * (s[..., None] if a.shape[-1:] == (3,) and s.shape[-1:] != (3,) else s) + np.asarray(c)
 
     @staticmethod
-    def mix_clamped(a, b, t):
-        """a + (b − a) · clamp(t, 0, 1): colours a and b, a float t (a Mix node with its factor clamped)."""
-        a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
-        return a + (b - a) * np.clip(t, 0.0, 1.0)[..., None]
-
-    @staticmethod
     def channel(color, i: int):
         return np.asarray(color)[..., i]
 

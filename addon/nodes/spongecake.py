@@ -38,15 +38,14 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
 * delta transmission: transparent × ∏ τ_j(ωo) — exact (ωi = −ωo and σ is symmetric); none over a substrate.
 * multiple scattering (Sec. 5): the network's lobe mapped like the layers, with the closure weights of the view
   along the normal (computed from the inputs alone: constants Cycles folds) [approx: ms-weights-at-normal], plus
-  Lambert lobes, all scaled per view by the baked ``MS Energy`` inputs: an energy budget e (``bake.spongecake.
-  energy_budget``), 1 + the reference's energy scale built on this form's own numpy prediction (``energy_values``),
-  linear in √μ between its knots (the reference's ``energy_at`` also subtracts the interpolation's error bound
-  where the table is convex); multiple scattering takes max(e − 1, 0). Where the form's own single scattering and
-  Dirac return more than 1 − m (thin, very rough layers near grazing), e < 1 and they are scaled by min(e, 1).
-  Where a layer is oriented off the normal the scale follows the view's azimuth too: the material feeds every knot from a packed float image of it
-  over asin(√μ) (the view's angle near the normal, √μ near grazing) and the azimuth, looked up at the view
-  (``view_inputs``, ``view_table``, ``view_wiring``); a
-  texture-driven bake keeps the material's own scale for every texel. [approx: ms-energy]
+  Lambert lobes, all scaled per view by the baked ``MS Energy`` input: an energy budget e (``bake.spongecake.
+  energy_budget``), 1 + the reference's energy scale built on this form's own numpy prediction (``energy_table``);
+  multiple scattering takes max(e − 1, 0). Where the form's own single scattering and Dirac return more than 1 − m
+  (thin, very rough layers near grazing), e < 1 and they are scaled by min(e, 1). The material feeds the input from
+  a packed float image of e over asin(√μ) (the view's angle near the normal, √μ near grazing), and over the view's
+  azimuth too where a layer is oriented off the normal, looked up bilinearly at the view (``view_inputs``,
+  ``view_table``, ``view_wiring``): one texture lookup, where a chain of mixes between knots cost the node group
+  more (docs/training.md). A texture-driven bake keeps the material's own table for every texel. [approx: ms-energy]
   In the node group each fiber layer's GGX lobe and the network's lobe for that layer are one Glossy BSDF (colours
   summed, α_x mixed harmonically: ``_FiberLobes``), and its budget is computed on that. [approx: ms-merged-fiber-lobe]
 
@@ -55,7 +54,6 @@ the OSL form evaluates it per microfacet (generalized_schlick_bsdf).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 from functools import lru_cache, partial
 
@@ -284,17 +282,16 @@ def _ms_sockets(p: model.Params) -> list[Socket]:
             out.append(Socket(f"{MS_PREFIX}L{k + 1} {_label(layer, prm)}", prm.kind, baked, k, MS_PANEL, True))
     weights = [prm for prm in MS_WEIGHTS if p.substrate is None or prm.name != "transmission"]
     out += [Socket(MS_PREFIX + prm.label, prm.kind, prm, None, MS_PANEL, True) for prm in weights]
-    return out + [Socket(MS_PREFIX + prm.label, prm.kind, prm, None, MS_PANEL, True) for prm in MS_ENERGY]
+    return out + [Socket(MS_ENERGY_INPUT, MS_ENERGY.kind, MS_ENERGY, None, MS_PANEL, True)]
 
 
-# The energy budget (``bake.spongecake.energy_budget``) at each knot of ``model.energy_cosines`` (``_energy``): per
-# material, not per texel (a texture-driven bake keeps the material's own).
-MS_ENERGY = tuple(
-    Param(f"energy_{k + 1}", f"Energy {k + 1}", "color", (2.0, 2.0, 2.0), 0.0, None,
-          description=f"Baked energy budget seen at {math.degrees(math.acos(c)):.0f}°: the multiple-scattering "
-                      "closures take what exceeds 1 (keeping them within what single scattering leaves); below 1 it "
-                      "scales single scattering down")
-    for k, c in enumerate(model.energy_cosines()))
+# The energy budget (``bake.spongecake.energy_budget``) at the view: fed from a table over the view (``view_inputs``),
+# per material, not per texel (a texture-driven bake keeps the material's own).
+MS_ENERGY = Param("energy", "Energy", "color", (2.0, 2.0, 2.0), 0.0, None,
+                  description="Baked energy budget at the view, fed from Lamina's view table (unlinked: its "
+                              "least value): the multiple-scattering closures take what exceeds 1 (keeping them "
+                              "within what single scattering leaves); below 1 it scales single scattering down")
+MS_ENERGY_INPUT = MS_PREFIX + MS_ENERGY.label
 
 
 def input_values(p: model.Params) -> dict:
@@ -347,7 +344,7 @@ def _lobe_values(p: model.Params) -> dict:
                "forward_albedo": forward.albedo, "forward_thickness": forward.thickness}
     values = {}
     for s in _ms_sockets(p):
-        if s.param in MS_ENERGY:
+        if s.param is MS_ENERGY:
             continue
         if s.layer is None:
             values[s.name] = weights[s.param.name]
@@ -356,51 +353,49 @@ def _lobe_values(p: model.Params) -> dict:
     return values
 
 
-# The albedos behind ``energy_values``: GGX reflection by its own quadrature (flakes may be near-mirrors), the other
+# The albedos behind the energy budget: GGX reflection by its own quadrature (flakes may be near-mirrors), the other
 # closures on a direction grid a quarter of the default.
 ENERGY_QUADRATURE = (32, 64)
-# The budget behind the knots and the view tables' rows is computed this many times finer along their coordinate
-# (√μ, asin(√μ); and the azimuth) (``bake.spongecake.budget_rows``), so that it is safe between them too.
-BUDGET_SUBSTEPS = 4
+# The budget behind the view tables' rows is computed this many times finer along their coordinate (asin(√μ); and the
+# azimuth where the stack is oriented) (``bake.spongecake.budget_rows``), so that it is safe between them too.
 VIEW_BUDGET_SUBSTEPS = (2, 2)
 
 
 def energy_values(p: model.Params, form: str) -> dict:
-    """The ``MS Energy`` inputs of ``form``'s shader: the energy budget (``bake.spongecake.energy_budget``: 1 + the
-    reference's energy scale, ``reference.spongecake.energy_tables``) computed on what that form renders (its numpy
-    prediction): what the form's single scattering and Dirac leave, over the albedo of its multiple-scattering
-    closures, so that the rendered furnace stays at most 1 (and is 1 less ``ENERGY_MARGIN`` for a white isotropic
-    stack at the knots) whatever the single-scattering mapping's error, even where that single scattering alone
-    exceeds 1."""
-    from ..bake.spongecake import budget_rows, energy_azimuths
-
-    scale = budget_rows(p, partial(_left, form=form), partial(_ms_furnace, form=form), model.ENERGY_KNOTS,
-                        energy_azimuths(p), BUDGET_SUBSTEPS).min(axis=1)
-    return {MS_PREFIX + prm.label: tuple(float(v) for v in row) for prm, row in zip(MS_ENERGY, scale)}
+    """The ``MS Energy`` input's own value, what the shader uses where the input is unlinked: the least budget of
+    ``view_inputs``' table over the views, so that the material gains energy at no view without its table."""
+    return {MS_ENERGY_INPUT: tuple(float(v) for v in energy_table(p, form).values.min(axis=(0, 1)))}
 
 
 def view_inputs(p: model.Params, form: str) -> dict:
-    """Inputs that the material feeds from a table over the view (socket name → ``view_table.ViewTable``): where a
-    layer is oriented off the normal the energy budget depends on the view's azimuth, and the ``MS Energy`` knots (a
-    budget per view cosine, the least over the azimuths) would leave the multiple scattering short by up to 70% at
-    other azimuths (docs/training.md). Every knot is then fed the same lookup of ``bake.spongecake.budget_rows`` on the
-    ``model.VIEW_ENERGY_GRID``: the knots' interpolation of equal values is that value."""
-    if not (p.multiple_scattering and model.anisotropic(p)):
-        return {}
+    """Inputs that the material feeds from a table over the view (socket name → ``view_table.ViewTable``): with
+    multiple scattering, ``MS Energy`` from ``energy_table``."""
+    return {MS_ENERGY_INPUT: energy_table(p, form)} if p.multiple_scattering else {}
+
+
+def energy_table(p: model.Params, form: str):
+    """The energy budget (``bake.spongecake.energy_budget``: 1 + the reference's energy scale, ``reference.
+    spongecake.energy_tables``) computed on what ``form`` renders (its numpy prediction): what the form's single
+    scattering and Dirac leave, over the albedo of its multiple-scattering closures, so that the rendered furnace
+    stays at most 1 (and is 1 less ``ENERGY_MARGIN`` for a white isotropic stack at the rows) whatever the
+    single-scattering mapping's error, even where that single scattering alone exceeds 1. A ``view_table.ViewTable``
+    on ``model.view_energy_grid``: over the view's angle, and its azimuth where a layer is oriented off the normal (a
+    budget per view cosine, the least over the azimuths, would leave the multiple scattering short by up to 70% at
+    other azimuths: docs/training.md). Cached per stack, form and weights folder."""
     from ..bake import spongecake as bake
 
-    table = _view_energy(p, form, str(bake.WEIGHTS))
-    return {MS_PREFIX + prm.label: table for prm in MS_ENERGY}
+    return _energy_table(p, form, str(bake.WEIGHTS))
 
 
 @lru_cache(maxsize=64)
-def _view_energy(p: model.Params, form: str, weights: str):
+def _energy_table(p: model.Params, form: str, weights: str):
     from ..bake.spongecake import budget_rows
     from .view_table import ViewTable
 
-    rows, azimuths = model.VIEW_ENERGY_GRID
+    rows, azimuths = model.view_energy_grid(p)
+    substeps = VIEW_BUDGET_SUBSTEPS if azimuths > 1 else VIEW_BUDGET_SUBSTEPS[:1]
     table = budget_rows(p, partial(_left, form=form), partial(_ms_furnace, form=form), rows,
-                        model.uniform_azimuths(azimuths), *VIEW_BUDGET_SUBSTEPS, cosines=model.view_table_cosines)
+                        model.uniform_azimuths(azimuths), *substeps)
     return ViewTable(table, model.view_table_lowest())
 
 
@@ -409,7 +404,7 @@ def ms_share(p: model.Params, form: str) -> float:
     normal (white furnace, mean over RGB; the Dirac counted as the material has it), from the numpy prediction."""
     normal = np.array([[0.0, 0.0, 1.0]])
     ss = _part_furnace(p, normal, form, single=True)
-    budget = np.asarray(ms_values(p, form)[MS_PREFIX + MS_ENERGY[-1].label])  # last knot: μ = 1
+    budget = energy_table(p, form).values[-1, 0]  # the last row: μ = 1
     ms = _ms_furnace(p, normal, form) * np.maximum(budget - 1.0, 0.0)
     total = float(np.mean(ss + ms))
     return float(np.mean(ms)) / total if total > 0.0 else 0.0
@@ -448,7 +443,7 @@ def shade(b, p: model.Params) -> None:
     if not p.multiple_scattering:
         _single_scattering(b, p, mu)
         return
-    budget = _energy(b, mu)  # scales single scattering below 1, multiple scattering above
+    budget = b.input(MS_ENERGY_INPUT, "color")  # scales single scattering below 1, multiple scattering above
     _scattering(b, p, mu, b.minimum(budget, (1.0, 1.0, 1.0)), b.maximum(budget - 1.0, (0.0, 0.0, 0.0)))
 
 
@@ -516,21 +511,6 @@ def _multiple_scattering(b, p: model.Params) -> None:
     b.diffuse(b.input(MS_PREFIX + "Reflection", "color"))
     if p.substrate is None:
         b.translucent(b.input(MS_PREFIX + "Transmission", "color"))
-
-
-def _energy(b, mu):
-    """The ``MS Energy`` inputs interpolated at the view: linear in √μ between the knots of
-    ``model.energy_cosines``, the first knot's value closer to grazing (``reference.spongecake.energy_at`` before
-    its error bound), as a
-    chain of clamped mixes (knot k takes over from k − 1 as x = (√μ − √μ₀) / step passes k − 1 .. k)."""
-    lo = math.sqrt(model.MIN_ENERGY_COS)
-    per_step = (len(MS_ENERGY) - 1) / (1.0 - lo)
-    root = b.sqrt(mu)
-    total = b.input(MS_PREFIX + MS_ENERGY[0].label, "color")
-    for k, prm in enumerate(MS_ENERGY[1:], 1):
-        t = b.multiply_add(root, per_step, -(lo * per_step + k - 1))
-        total = b.mix_clamped(total, b.input(MS_PREFIX + prm.label, "color"), t)
-    return total
 
 
 class _EnergyScaled:

@@ -80,13 +80,18 @@ def _coordinates_group(table):
     (sx, ox), (sy, oy) = table.texel_coordinates()
     rows, azimuths = table.shape
     name = f"Lamina view coordinates {rows}x{azimuths} asin from {table.lowest:.6g}"
-    return shared_group(name, lambda b: [_coordinates(b, sx, ox, sy, oy)], [])
+    return shared_group(name, lambda b: [_coordinates(b, sx, ox, sy, oy, azimuths > 1)], [])
 
 
-def _coordinates(b: NodeBackend, sx, ox, sy, oy):
-    view, normal, tangent = b.view(), b.normal(), b.tangent()
-    turn = b.fract(b.atan2(b.dot(view, b.cross(normal, tangent)), b.dot(view, tangent)) * (0.5 / math.pi))
-    return b.combine(b.multiply_add(turn, sx, ox), b.multiply_add(b.asin(b.sqrt(b.cos_view())), sy, oy), 0.0)
+def _coordinates(b: NodeBackend, sx, ox, sy, oy, over_azimuth: bool):
+    """The texel coordinates of the view; a table of one azimuth (its two equal columns) needs none of the azimuth
+    math."""
+    x = ox
+    if over_azimuth:
+        view, normal, tangent = b.view(), b.normal(), b.tangent()
+        turn = b.fract(b.atan2(b.dot(view, b.cross(normal, tangent)), b.dot(view, tangent)) * (0.5 / math.pi))
+        x = b.multiply_add(turn, sx, ox)
+    return b.combine(x, b.multiply_add(b.asin(b.sqrt(b.cos_view())), sy, oy), 0.0)
 
 
 def _unused(tree) -> list:

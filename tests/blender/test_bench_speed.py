@@ -8,6 +8,7 @@ bpy = pytest.importorskip("bpy")
 
 import addon  # noqa: E402
 from addon.bench import spongecake as bench  # noqa: E402
+from addon.nodes import material  # noqa: E402
 from addon.operators import blend_io  # noqa: E402
 
 SETUP = {"nodes": 0.5, "osl": 2.0}  # a fake render's fixed cost: OSL compiles its shader
@@ -24,20 +25,13 @@ def registered():
 def _fake_render(calls):
     def render(mat, spec, samples, seed, path):
         record = json.loads(mat["lamina"])
-        form = "osl" if any(n.bl_idname == "ShaderNodeScript" for n in _nodes(mat)) else "nodes"
+        form = material.form_of(mat)
         ms = bool(record["params"]["multiple_scattering"])
         calls.append((form, ms, samples))
         jitter = 0.1 * (len(calls) % 3)  # later rounds are slower or faster: the fastest counts
         return None, SETUP[form] + jitter + PER_SAMPLE[ms] * samples
 
     return render
-
-
-def _nodes(mat):
-    for node in mat.node_tree.nodes:
-        yield node
-        if node.bl_idname == "ShaderNodeGroup" and node.node_tree is not None:
-            yield from node.node_tree.nodes
 
 
 def test_the_sampling_cost_cancels_the_set_up_and_the_whole_render_keeps_it(monkeypatch):

@@ -102,12 +102,12 @@ def test_rebaking_a_node_made_before_the_energy_inputs_rebuilds_it():
     mat = material.new_material(model.ID, _preset("fabric", multiple_scattering=True), "nodes")
     mine = mat.node_tree.nodes.new("ShaderNodeValue")
     old = material.shader_node(mat).node_tree.copy()  # an earlier generator's group, under its own name
-    old.interface.remove(old.interface.items_tree["MS Energy 1"])
+    old.interface.remove(old.interface.items_tree["MS Energy"])
     material.shader_node(mat).node_tree = old
-    assert "MS Energy 1" not in material.shader_node(mat).inputs
+    assert "MS Energy" not in material.shader_node(mat).inputs
     _set_thickness(mat, 3.0)
     assert material.bake_constants(mat)
-    assert "MS Energy 1" in material.shader_node(mat).inputs and material.form_of(mat) == "nodes"
+    assert "MS Energy" in material.shader_node(mat).inputs and material.form_of(mat) == "nodes"
     assert mine.name in mat.node_tree.nodes and not material.ms_is_stale(mat)
     _assert_ms_inputs_are_the_prediction(mat)
 
@@ -256,16 +256,16 @@ TILTED = {"layers": [{"type": "surface", "roughness": 0.2, "albedo": [0.95, 0.95
 
 @pytest.mark.parametrize("form", material.FORMS)
 def test_an_oriented_stack_renders_its_energy_table_over_the_view(form, tmp_path):
-    """Every ``MS Energy`` knot of an oriented stack is fed one packed float image looked up at the view; Cycles
-    renders the prediction that uses it (the knots alone, the least over the azimuths, are 24% off on this sphere:
-    the test fails without the table). Turning multiple scattering off removes the lookup and its image."""
+    """An oriented stack's ``MS Energy`` is fed a packed float image over the view's angle and azimuth, looked up at
+    the view; Cycles renders the prediction that uses it (the least over the azimuths is 24% off on this sphere: the
+    test fails without the azimuth). Turning multiple scattering off removes the lookup and its image."""
     p = model.params_from_dict(TILTED)
     mat = material.new_material(model.ID, p, form)
     node = material.shader_node(mat)
     (tex,) = [n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeTexImage"]
     assert tex.image.packed_file is not None and tex.interpolation == "Linear" and tex.extension == "EXTEND"
-    knots = [node.inputs[material.socket_key(node, f"MS Energy {k + 1}")] for k in range(model.ENERGY_KNOTS)]
-    assert all(s.links[0].from_node == tex for s in knots)
+    assert node.inputs[material.socket_key(node, "MS Energy")].links[0].from_node == tex
+    assert tex.image.size[:] == (model.VIEW_ENERGY_GRID[1] + 1, model.VIEW_ENERGY_GRID[0])
     spec = S.sphere_scene(resolution=40)
     assert relative_error(render(mat, spec, 32, tmp_path), predicted_image(model.ID, p, form, spec), spec) < 0.02
     image = tex.image.name
@@ -279,25 +279,33 @@ def _lookups(mat):
     return sorted(n.bl_idname for n in mat.node_tree.nodes if n.get(view_wiring.VIEW_TAG))
 
 
+def _table_images(mat):
+    return {n.image.name for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeTexImage"}
+
+
 def test_the_view_table_follows_rebakes_and_forms_and_leaves_the_users_links_alone():
     mat = material.new_material(model.ID, model.params_from_dict(TILTED), "nodes")
     assert _lookups(mat) == ["ShaderNodeGroup", "ShaderNodeTexImage"]
-    first = next(n.image.name for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeTexImage")
+    (first,) = _table_images(mat)
     material.set_form(mat, "osl")  # the lookup moves to the new node: still one
     node = material.shader_node(mat)
     assert _lookups(mat) == ["ShaderNodeGroup", "ShaderNodeTexImage"]
-    assert node.inputs["MS_Energy_1"].links[0].from_node.image.name == first
-    mine = mat.node_tree.nodes.new("ShaderNodeRGB")
-    mat.node_tree.links.new(mine.outputs[0], node.inputs["MS_Energy_2"])
+    assert node.inputs["MS_Energy"].links[0].from_node.image.name == first
     _set_thickness(mat, 1.5)  # a new table: a new image, the old one removed
     assert material.bake_constants(mat)
-    images = {n.image.name for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeTexImage"}
-    assert len(images) == 1 and first not in images and first not in bpy.data.images
-    assert node.inputs["MS_Energy_2"].links[0].from_node == mine
+    (second,) = _table_images(mat)
+    assert second != first and first not in bpy.data.images
     assert not material.bake_constants(mat)  # nothing changes the second time: no depsgraph loop
-    _set_orientation(mat, (0.0, 0.0, 1.0))  # along the normal: no table
+    _set_orientation(mat, (0.0, 0.0, 1.0))  # along the normal: a table over the view's angle alone
     assert material.bake_constants(mat)
-    assert _lookups(mat) == [] and node.inputs["MS_Energy_2"].links[0].from_node == mine
+    (third,) = _table_images(mat)
+    assert second not in bpy.data.images and bpy.data.images[third].size[:] == (2, model.VIEW_ENERGY_GRID[0])
+    mine = mat.node_tree.nodes.new("ShaderNodeRGB")
+    mat.node_tree.links.new(mine.outputs[0], node.inputs["MS_Energy"])  # the user's own link replaces the lookup
+    _set_thickness(mat, 2.5)
+    assert material.bake_constants(mat)
+    assert _lookups(mat) == [] and third not in bpy.data.images  # the idle lookup went, with its image
+    assert node.inputs["MS_Energy"].links[0].from_node == mine
 
 
 def _set_orientation(mat, value):

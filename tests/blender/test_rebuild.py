@@ -9,7 +9,7 @@ bpy = pytest.importorskip("bpy")
 
 from addon.bake import exr  # noqa: E402
 from addon.models import spongecake as model  # noqa: E402
-from addon.nodes import material, osl, texture_wiring  # noqa: E402
+from addon.nodes import material, osl, texture_wiring, view_wiring  # noqa: E402
 from addon.nodes import spongecake as spongecake_nodes  # noqa: E402
 from addon.operators import bake_ops  # noqa: E402
 
@@ -88,7 +88,8 @@ def _assert_user_setup_kept(mat, names, form):
         assert _feeds(lamina.inputs["LaminaTangent"]) == [(helpers[0].name, "Tangent")]
     else:
         assert helpers == []
-    user = {n.name for n in tree.nodes} - {"Lamina"} - {n.name for n in helpers}
+    lookups = {n.name for n in tree.nodes if n.get(view_wiring.VIEW_TAG)}  # the MS Energy table's, with MS on
+    user = {n.name for n in tree.nodes} - {"Lamina"} - {n.name for n in helpers} - lookups
     assert user == set(names.values())  # nothing added, nothing lost
 
 
@@ -122,9 +123,14 @@ def test_toggling_multiple_scattering_keeps_the_users_nodes_and_links(form):
     material.set_multiple_scattering(mat, False)
     _assert_user_setup_kept(mat, {**names, "ms": ms_value.name}, form)
     assert not any(o.is_linked for o in ms_value.outputs)  # its input is gone: the link with it, not the node
+    assert _view_lookups(mat) == []  # and the MS Energy table's lookup with its image
     material.set_multiple_scattering(mat, True)
     _assert_user_setup_kept(mat, {**names, "ms": ms_value.name}, form)
-    assert not material.ms_is_stale(mat)
+    assert not material.ms_is_stale(mat) and _view_lookups(mat) == ["ShaderNodeGroup", "ShaderNodeTexImage"]
+
+
+def _view_lookups(mat):
+    return sorted(n.bl_idname for n in mat.node_tree.nodes if n.get(view_wiring.VIEW_TAG))
 
 
 def test_a_lamina_node_in_a_frame_stays_there():
@@ -189,9 +195,10 @@ def _bake_state(mat):
 def test_baked_textures_survive_a_form_switch(baked):
     mat, names = baked
     nodes, ms = _bake_state(mat)
-    energy = {material._norm(spongecake_nodes.MS_PREFIX + prm.label) for prm in spongecake_nodes.MS_ENERGY}
-    assert nodes and all(feeds for name, feeds in ms.items() if name not in energy)  # every per-texel MS input is
-    assert not any(ms[name] for name in energy)  # driven by a baked node; the energy scale is the material's own
+    energy = material._norm(spongecake_nodes.MS_ENERGY_INPUT)
+    assert nodes and all(feeds for name, feeds in ms.items() if name != energy)  # every per-texel MS input is
+    assert view_wiring.fed(_input(mat, "MS Energy"))  # driven by a baked node; the energy scale is the material's
+    assert not {name for name, _ in ms[energy]} & set(nodes)  # own: its view table
     images = {n.image.name for n in texture_wiring.baked_nodes(mat) if n.bl_idname == "ShaderNodeTexImage"}
     key = mat[material.MS_KEY]
     for form in ("osl", "nodes"):

@@ -18,7 +18,7 @@ from addon.bake import exr, textures  # noqa: E402
 from addon.bake import layer_rows as rows_  # noqa: E402
 from addon.bake import spongecake as ms  # noqa: E402
 from addon.models import spongecake as model  # noqa: E402
-from addon.nodes import material, predicted_image, texture_wiring  # noqa: E402
+from addon.nodes import material, predicted_image, texture_wiring, view_wiring  # noqa: E402
 from addon.nodes import spongecake as mapping  # noqa: E402
 from addon.operators import bake_ops  # noqa: E402
 from addon.operators.cycles_render import render_cycles  # noqa: E402
@@ -140,8 +140,10 @@ def _cache_files(folder):
 
 
 def _ms_links(mat):
+    """The Lamina node's MS inputs fed by baked textures (not the ``MS Energy`` view table's lookup)."""
     node = material.shader_node(mat)
-    return {s.name: s.links[0].from_node for s in node.inputs if s.is_linked and s.name.startswith("MS")}
+    return {s.name: s.links[0].from_node for s in node.inputs
+            if s.is_linked and s.name.startswith("MS") and not view_wiring.fed(s)}
 
 
 # ------------------------------------------------------------------------------------------- baking
@@ -162,9 +164,9 @@ def test_baked_maps_load_as_non_color_and_match_the_prediction_per_source_texel(
     form = material.form_of(mat)
     own = mapping.ms_values(p, form)  # the energy scale is the material's own, not per texel
     node = material.shader_node(mat)
-    for prm in mapping.MS_ENERGY:
-        value = node.inputs[material.socket_key(node, mapping.MS_PREFIX + prm.label)].default_value
-        np.testing.assert_allclose(np.asarray(value)[:3], own[mapping.MS_PREFIX + prm.label], rtol=1e-5)
+    energy = node.inputs[material.socket_key(node, mapping.MS_ENERGY_INPUT)]
+    np.testing.assert_allclose(np.asarray(energy.default_value)[:3], own[mapping.MS_ENERGY_INPUT], rtol=1e-5)
+    assert view_wiring.fed(energy)  # from the material's own view table
     for name, channels in layout.items():
         tex = next(n for n in nodes.values() if n.label == f"Lamina bake: {name}")
         image = tex.image
@@ -199,8 +201,8 @@ def test_srgb_textures_are_linearised_like_blender():
 
 def _render_halves(param, form, folder, monkeypatch):
     """Cycles' render of a two-valued texture and the prediction of each half: that texel's baked lobes with the
-    material's own energy scale (not baked per texel: its ``MS Energy`` inputs hold the Lamina node's, or its view
-    table where the node's own stack is oriented)."""
+    material's own energy scale (not baked per texel: its ``MS Energy`` input is fed the Lamina node's own view
+    table)."""
     path, received = _halves(folder, param)
     mat, _ = _material(param, path, form)
     bake_ops.bake(mat)
@@ -208,17 +210,10 @@ def _render_halves(param, form, folder, monkeypatch):
     img, _ = render_cycles(mat, spec, 32, 0, os.path.join(str(folder), f"{form}.exr"))
     halves = texture_halves(spec)
     texel = {"left": (H - 1, 0), "right": (H - 1, W - 1)}
-    node = material.shader_node(mat)
-    own = {mapping.MS_PREFIX + prm.label:
-           tuple(node.inputs[material.socket_key(node, mapping.MS_PREFIX + prm.label)].default_value)[:3]
-           for prm in mapping.MS_ENERGY}
-    monkeypatch.setattr(mapping, "energy_values", lambda p, f: own)
     views = mapping.view_inputs(material.current_params(mat)[1], form)
     monkeypatch.setattr(mapping, "view_inputs", lambda p, f: views)
-    mapping._ms_values.cache_clear()
     predicted = {half: predicted_image(model.ID, _params({param: _texel_value(received, *texel[half])}), form, spec)
                  for half in halves}
-    mapping._ms_values.cache_clear()
     return img, halves, predicted, received
 
 
@@ -501,7 +496,8 @@ def test_cli_bake_refusals_exit_non_zero_with_one_line_and_write_nothing(args, c
     blend = _blend_with_texture(tmp_path, ms="--ms-off" not in args)
     if "--nan" in args:
         mat = bpy.data.materials["Textured"]
-        tex = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeTexImage")
+        tex = next(n for n in mat.node_tree.nodes
+                   if n.bl_idname == "ShaderNodeTexImage" and not n.get(view_wiring.VIEW_TAG))
         tex.image = bpy.data.images.load(_nan_texture(tmp_path))
         bpy.ops.wm.save_mainfile()
     out = tmp_path / "out.blend"

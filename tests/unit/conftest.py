@@ -15,8 +15,8 @@ def coarse_energy_tables(monkeypatch):
     monkeypatch.setattr(spongecake, "ENERGY_SAMPLES", 64)
     monkeypatch.setattr(spongecake_model, "ENERGY_AZIMUTHS", 4)
     monkeypatch.setattr(spongecake_model, "VIEW_ENERGY_GRID", (8, 8))
-    for cache in (spongecake._energy_tables, spongecake_nodes._view_energy):
+    for cache in (spongecake._energy_tables, spongecake_nodes._energy_table):
         cache.cache_clear()
     yield
-    for cache in (spongecake._energy_tables, spongecake_nodes._view_energy):
+    for cache in (spongecake._energy_tables, spongecake_nodes._energy_table):
         cache.cache_clear()

@@ -248,14 +248,14 @@ def test_multiple_scattering_closures_follow_the_view_only_through_the_energy_sc
         np.testing.assert_allclose(color, np.broadcast_to(color[0], color.shape), rtol=1e-12, err_msg=kind)
 
 
-def test_with_view_independent_weights_a_white_stack_still_returns_what_it_receives_at_the_knots():
+def test_with_view_independent_weights_a_white_stack_still_returns_what_it_receives_at_the_rows():
     """The energy scale restores each view's total [ms-weights-at-normal, ms-energy]: a white isotropic stack
-    with multiple scattering is 1 less the scale's margin in the form's furnace at the scale's knots."""
+    with multiple scattering is 1 less the scale's margin in the form's furnace at the rows of its energy table."""
     white = model.params_from_dict({"layers": [
         {"type": "surface", "roughness": 0.3, "albedo": [1, 1, 1], "thickness": 0.5},
         {"type": "hg", "roughness": 0.4, "albedo": [1, 1, 1], "thickness": 1.0}],
         "multiple_scattering": True, "delta_transmission": True})
-    mu = np.asarray(model.energy_cosines())[[2, 5, 7]]
+    mu = np.asarray(model.view_table_cosines(model.VIEW_ENERGY_GRID[0]))[[4, 18, 31]]
     views = np.stack([np.sqrt(1.0 - mu * mu), 0.0 * mu, mu], axis=1)
     furnace = expr.closure_furnace(lambda w: nodes._backend(model.ID, white, "osl", w),
                                    views, mapping.ENERGY_QUADRATURE, closures_np.SHARP_ALBEDO)
@@ -291,8 +291,7 @@ def test_the_node_group_makes_one_closure_of_each_fiber_layers_two_lobes(name, m
     from dataclasses import replace
 
     p = replace(model.params_from_dict(presets.load(model.ID, name)), multiple_scattering=True)
-    values = {**nodes.input_values(model.ID, p, "osl"), **{mapping.MS_PREFIX + prm.label: (2.0, 2.0, 2.0)
-                                                           for prm in mapping.MS_ENERGY}}
+    values = {**nodes.input_values(model.ID, p, "osl"), mapping.MS_ENERGY_INPUT: (2.0, 2.0, 2.0)}
     wo = _dirs(6, 7)
     lobes = {}
     for form in ("osl", "nodes"):

@@ -1,5 +1,5 @@
 """SpongeCake multiple scattering's energy scale (issue 15, part 1): ``reference.spongecake.energy_tables`` and the
-``MS Energy`` inputs of the Cycles forms (``nodes.spongecake.energy_values``).
+``MS Energy`` input of the Cycles forms and its view table (``nodes.spongecake.energy_table``).
 
 White furnaces are estimated with the reference's own stratified estimator (``furnace_albedo``, 4096 directions per
 view: about 0.3 % noise; 16384 where a test bounds the largest value) and with the numpy prediction of what Cycles
@@ -15,6 +15,7 @@ from addon.models import spongecake as model
 from addon.nodes import _backend
 from addon.nodes.closures_np import SHARP_ALBEDO
 from addon.nodes.expr import closure_furnace
+from addon.nodes.view_table import ViewTable
 from addon.nodes import spongecake as mapping
 from addon.reference import spongecake as ref
 from addon.reference.frames import spherical
@@ -122,13 +123,16 @@ def test_cycles_forms_never_gain_energy(name, form):
 
 
 @pytest.mark.parametrize("form", ["osl", "nodes"])
-def test_energy_inputs_are_the_forms_scale(form):
+def test_the_energy_input_is_fed_the_forms_budget_over_the_view(form):
+    """An isotropic stack's budget is one column over the view's angle; the input's own value (unlinked) is its
+    least."""
     p = _params({"layers": WHITE["back-scattering medium"]})
-    values = mapping.ms_values(p, form)
-    energy = [values[mapping.MS_PREFIX + prm.label] for prm in mapping.MS_ENERGY]
-    assert len(energy) == model.ENERGY_KNOTS
+    table = mapping.view_inputs(p, form)[mapping.MS_ENERGY_INPUT]
+    assert table is mapping.energy_table(p, form) and table.shape == (model.VIEW_ENERGY_GRID[0], 1)
+    energy = table.values
     assert np.all(np.isfinite(energy)) and np.min(energy) >= 1.0  # a budget: 1 + the scale (here nothing is capped)
     assert np.ptp(energy) > 0.01  # a view-dependent scale, not a constant
+    np.testing.assert_array_equal(mapping.ms_values(p, form)[mapping.MS_ENERGY_INPUT], energy.min(axis=(0, 1)))
 
 
 def test_energy_scale_limits():
@@ -258,8 +262,7 @@ def test_extremes_give_finite_non_negative_scales(layer, form):
     above, below = ref.energy_tables(p)
     assert np.all(np.isfinite(above)) and np.all(np.isfinite(below))
     assert above.min() >= 0.0 and below.min() >= 0.0
-    values = mapping.ms_values(p, form)
-    energy = np.array([values[mapping.MS_PREFIX + prm.label] for prm in mapping.MS_ENERGY])
+    energy = mapping.energy_table(p, form).values
     assert np.all(np.isfinite(energy)) and energy.min() >= 0.0
 
 
@@ -284,22 +287,26 @@ def test_the_reference_follows_the_azimuth_of_oriented_stacks():
 
 @pytest.mark.parametrize("form", ["osl", "nodes"])
 def test_the_cycles_forms_follow_the_azimuth_of_oriented_stacks(form, monkeypatch):
-    """The forms feed an oriented stack's ``MS Energy`` knots from a table over the view's √μ and azimuth
-    (``view_inputs``), so its white furnace is 1 at every azimuth; the knots alone (the least over the azimuths) leave
-    it 3.5% short on average here, 9% at worst."""
+    """The forms feed an oriented stack's ``MS Energy`` from a table over the view's angle and azimuth
+    (``view_inputs``), so its white furnace is 1 at every azimuth; a table over the angle alone (the least over the
+    azimuths) leaves it 3.5% short on average here, 9% at worst."""
     p = _params(OTHERS["tilted flakes over in-plane fibers"])
     rng = np.random.default_rng(11)
     wo = spherical(np.cos(np.radians(rng.uniform(0.0, 85.0, 48))), rng.uniform(0.0, 2.0 * np.pi, 48))
     a = _form_furnace(p, form, wo)
     assert np.mean(np.abs(a - 1.0)) <= 0.008 and a.max() <= 1.015, a[:, 0]
-    monkeypatch.setattr(mapping, "view_inputs", lambda q, f: {})
-    knots = _form_furnace(p, form, wo)
-    assert np.mean(np.abs(knots - 1.0)) > 0.025, knots[:, 0]
+    table = mapping.energy_table(p, form)
+    assert table.shape == model.VIEW_ENERGY_GRID
+    least = ViewTable(table.values.min(axis=1, keepdims=True), table.lowest)
+    monkeypatch.setattr(mapping, "view_inputs", lambda q, f: {mapping.MS_ENERGY_INPUT: least})
+    one_column = _form_furnace(p, form, wo)
+    assert np.mean(np.abs(one_column - 1.0)) > 0.025, one_column[:, 0]
 
 
-def test_isotropic_stacks_feed_no_input_from_a_view_table():
+def test_only_stacks_with_multiple_scattering_feed_an_input_from_a_view_table():
     for form in ("osl", "nodes"):
-        assert mapping.view_inputs(_params({"layers": WHITE["four layers"]}), form) == {}
+        four = mapping.view_inputs(_params({"layers": WHITE["four layers"]}), form)
+        assert four.keys() == {mapping.MS_ENERGY_INPUT} and four[mapping.MS_ENERGY_INPUT].shape[1] == 1
         assert mapping.view_inputs(replace(_params(OTHERS["tilted flakes over in-plane fibers"]),
                                            multiple_scattering=False), form) == {}
 
