@@ -70,7 +70,7 @@ MS_VERSION = 9  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` 
 # stack's scale over the view's azimuth too (``nodes.spongecake.view_inputs``), 5 the energy budget (``energy_budget``),
 # 6 its view tables made safe along the view cosine too (``budget_rows``), 7 the forward lobe (``decode``), 8 each
 # form's budget on its own prediction (the node group's merged fiber lobes: ``nodes.spongecake._FiberLobes``), 9 one
-# ``MS Energy`` input fed from a view table for every stack (``nodes.spongecake.energy_table``)
+# ``MS Energy`` input fed from a view table for every stack (``nodes.spongecake.budget_table``)
 NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 
@@ -400,14 +400,12 @@ def safe_between(fine, substeps: int, weight=None) -> np.ndarray:
     return rows
 
 
-def energy_table(params: model.Params, left_of, lobes_of, side: float = 1.0, per_azimuth: bool = False) -> np.ndarray:
-    """The energy scale on ``models.spongecake.energy_cosines`` for views above (side 1) or below (-1):
-    ``energy_grid`` on those knots. Where a layer is oriented off the normal the scale depends on the view's azimuth:
-    at ``ENERGY_AZIMUTHS`` azimuths (``energy_azimuths``), (``ENERGY_KNOTS``, P, 3) with ``per_azimuth`` (P = 1 for
-    isotropic stacks), else the least over them, (``ENERGY_KNOTS``, 3), so that no azimuth gains energy (a closure
-    weight that follows the view's angle only)."""
-    table = energy_grid(params, left_of, lobes_of, np.asarray(model.energy_cosines()), energy_azimuths(params), side)
-    return table if per_azimuth else table.min(axis=1)
+def energy_table(params: model.Params, left_of, lobes_of, side: float = 1.0) -> np.ndarray:
+    """The reference's energy scale (``ENERGY_KNOTS``, P, 3) on ``models.spongecake.energy_cosines`` for views above
+    (side 1) or below (-1): ``energy_grid`` on those knots and, where a layer is oriented off the normal (the scale
+    then depends on the view's azimuth), at ``ENERGY_AZIMUTHS`` azimuths (``energy_azimuths``; P = 1 for isotropic
+    stacks)."""
+    return energy_grid(params, left_of, lobes_of, np.asarray(model.energy_cosines()), energy_azimuths(params), side)
 
 
 def energy_grid(params: model.Params, left_of, lobes_of, mu, phi, side: float = 1.0,

@@ -621,7 +621,7 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "they allow. The Cycles forms look the scale up in a table over asin(√μ), and the azimuth for an "
               "oriented stack (a packed float image, bilinear), without that estimate; an "
               "energy budget (training.md) caps their single scattering where it alone returns more than it "
-              "receives, and the tables are lowered where interpolating between their knots would exceed them."]
+              "receives, and the tables are lowered where interpolating between their rows would exceed them."]
     dense = {form: dense_cycles_furnace(sizes, form) for form in ("osl", "nodes")}
     lines += ["", f"The Cycles forms on a denser grid of views (θo {DENSE_THETAS[0]:g}° to {DENSE_THETAS[-1]:g}° in "
               f"steps of {DENSE_THETAS[1] - DENSE_THETAS[0]:g}°; oriented stacks at {DENSE_AZIMUTHS} azimuths; "

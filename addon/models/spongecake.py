@@ -27,7 +27,7 @@ OPAQUE_THICKNESS = 30.0
 ENERGY_KNOTS = 8
 MIN_ENERGY_COS = 0.02
 ENERGY_AZIMUTHS = 32  # view azimuths per knot where a layer is oriented off the normal (``energy_tables``)
-# The Cycles forms' table of the energy budget (``nodes.spongecake.energy_table``): rows uniform in asin(√μ) from
+# The Cycles forms' table of the energy budget (``nodes.spongecake.budget_table``): rows uniform in asin(√μ) from
 # MIN_ENERGY_COS to 1 by azimuths (``view_energy_grid``: one where no layer is oriented off the normal), looked up
 # bilinearly as a float image (``nodes.view_table``).
 VIEW_ENERGY_GRID = (32, 64)

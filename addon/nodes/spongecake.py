@@ -39,7 +39,7 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
 * multiple scattering (Sec. 5): the network's lobe mapped like the layers, with the closure weights of the view
   along the normal (computed from the inputs alone: constants Cycles folds) [approx: ms-weights-at-normal], plus
   Lambert lobes, all scaled per view by the baked ``MS Energy`` input: an energy budget e (``bake.spongecake.
-  energy_budget``), 1 + the reference's energy scale built on this form's own numpy prediction (``energy_table``);
+  energy_budget``), 1 + the reference's energy scale built on this form's own numpy prediction (``budget_table``);
   multiple scattering takes max(e − 1, 0). Where the form's own single scattering and Dirac return more than 1 − m
   (thin, very rough layers near grazing), e < 1 and they are scaled by min(e, 1). The material feeds the input from
   a packed float image of e over asin(√μ) (the view's angle near the normal, √μ near grazing), and over the view's
@@ -110,9 +110,9 @@ APPROXIMATIONS = {
                                     {**_one(type="surface", roughness=0.3, thickness=0.3),
                                      "substrate": {"type": "dielectric", "roughness": 0.3, "ior": 1.5}}),
     "ms-energy": ("multiple scattering's energy scale on the form's own single scattering (not the reference's; "
-                  "where that exceeds 1, it is scaled down), on 8 view cosines, linear between them (an oriented "
-                  "stack's: a 32 x 64 table over asin(√μ) and the azimuth, bilinear; the reference bounds the interpolation's error); one per material in "
-                  "texture-driven bakes",
+                  "where that exceeds 1, it is scaled down), in a table over asin(√μ) (32 rows; by 64 azimuths "
+                  "where a layer is oriented), bilinear (the reference bounds the interpolation's error; the table "
+                  "does not); one per material in texture-driven bakes",
                   {**_one(type="surface", roughness=0.5, thickness=1.0), "multiple_scattering": True}),
     "ms-weights-at-normal": ("the multiple-scattering closures' weights are the layer math's for the view along "
                              "the normal (constants Cycles folds), their total restored per view by the energy "
@@ -364,16 +364,16 @@ VIEW_BUDGET_SUBSTEPS = (2, 2)
 def energy_values(p: model.Params, form: str) -> dict:
     """The ``MS Energy`` input's own value, what the shader uses where the input is unlinked: the least budget of
     ``view_inputs``' table over the views, so that the material gains energy at no view without its table."""
-    return {MS_ENERGY_INPUT: tuple(float(v) for v in energy_table(p, form).values.min(axis=(0, 1)))}
+    return {MS_ENERGY_INPUT: tuple(float(v) for v in budget_table(p, form).values.min(axis=(0, 1)))}
 
 
 def view_inputs(p: model.Params, form: str) -> dict:
     """Inputs that the material feeds from a table over the view (socket name → ``view_table.ViewTable``): with
-    multiple scattering, ``MS Energy`` from ``energy_table``."""
-    return {MS_ENERGY_INPUT: energy_table(p, form)} if p.multiple_scattering else {}
+    multiple scattering, ``MS Energy`` from ``budget_table``."""
+    return {MS_ENERGY_INPUT: budget_table(p, form)} if p.multiple_scattering else {}
 
 
-def energy_table(p: model.Params, form: str):
+def budget_table(p: model.Params, form: str):
     """The energy budget (``bake.spongecake.energy_budget``: 1 + the reference's energy scale, ``reference.
     spongecake.energy_tables``) computed on what ``form`` renders (its numpy prediction): what the form's single
     scattering and Dirac leave, over the albedo of its multiple-scattering closures, so that the rendered furnace
@@ -384,11 +384,11 @@ def energy_table(p: model.Params, form: str):
     other azimuths: docs/training.md). Cached per stack, form and weights folder."""
     from ..bake import spongecake as bake
 
-    return _energy_table(p, form, str(bake.WEIGHTS))
+    return _budget_table(p, form, str(bake.WEIGHTS))
 
 
 @lru_cache(maxsize=64)
-def _energy_table(p: model.Params, form: str, weights: str):
+def _budget_table(p: model.Params, form: str, weights: str):
     from ..bake.spongecake import budget_rows
     from .view_table import ViewTable
 
@@ -404,7 +404,7 @@ def ms_share(p: model.Params, form: str) -> float:
     normal (white furnace, mean over RGB; the Dirac counted as the material has it), from the numpy prediction."""
     normal = np.array([[0.0, 0.0, 1.0]])
     ss = _part_furnace(p, normal, form, single=True)
-    budget = energy_table(p, form).values[-1, 0]  # the last row: μ = 1
+    budget = budget_table(p, form).values[-1, 0]  # the last row: μ = 1
     ms = _ms_furnace(p, normal, form) * np.maximum(budget - 1.0, 0.0)
     total = float(np.mean(ss + ms))
     return float(np.mean(ms)) / total if total > 0.0 else 0.0

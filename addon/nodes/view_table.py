@@ -2,8 +2,9 @@
 up a small float image (Image Texture node, Linear interpolation, Extend): bilinear between texel centres.
 
 A closure weight in a node group or OSL shader can follow the view's angle from the normal through math on the
-Geometry node, but a table over the azimuth as well (an oriented SpongeCake stack's multiple-scattering energy) is a
-per-material image: ``view_wiring`` feeds a Lamina node's inputs from one, and ``NumpyBackend.input`` evaluates a
+Geometry node, but a measured table over it (SpongeCake's multiple-scattering energy budget), and over the azimuth as
+well for an oriented stack, is one texture lookup of a per-material image (one azimuth column where the table has
+no azimuth): ``view_wiring`` feeds a Lamina node's inputs from one, and ``NumpyBackend.input`` evaluates a
 ``ViewTable`` at its views with ``at``, so the numpy prediction renders what Cycles renders.
 
 The texel grid: row r (image row r from the bottom) at asin(√μ) = lowest + (π/2 − lowest) r / (rows − 1), μ the view's

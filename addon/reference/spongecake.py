@@ -299,9 +299,9 @@ def _energy_tables(params: Params, weights: str):
     def lobes_of(stack, wo):
         return network_albedo(stack, predict(stack), wo)
 
-    above = energy_table(params, left_of, lobes_of, per_azimuth=True)
+    above = energy_table(params, left_of, lobes_of)
     below = (np.zeros_like(above) if params.substrate is not None
-             else energy_table(params, left_of, lobes_of, -1.0, per_azimuth=True))
+             else energy_table(params, left_of, lobes_of, -1.0))
     return above, below
 
 

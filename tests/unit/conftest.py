@@ -15,8 +15,9 @@ def coarse_energy_tables(monkeypatch):
     monkeypatch.setattr(spongecake, "ENERGY_SAMPLES", 64)
     monkeypatch.setattr(spongecake_model, "ENERGY_AZIMUTHS", 4)
     monkeypatch.setattr(spongecake_model, "VIEW_ENERGY_GRID", (8, 8))
-    for cache in (spongecake._energy_tables, spongecake_nodes._energy_table):
+    caches = (spongecake._energy_tables, spongecake_nodes._budget_table, spongecake_nodes._ms_values)
+    for cache in caches:
         cache.cache_clear()
     yield
-    for cache in (spongecake._energy_tables, spongecake_nodes._energy_table):
+    for cache in caches:
         cache.cache_clear()

@@ -1,5 +1,5 @@
 """SpongeCake multiple scattering's energy scale (issue 15, part 1): ``reference.spongecake.energy_tables`` and the
-``MS Energy`` input of the Cycles forms and its view table (``nodes.spongecake.energy_table``).
+``MS Energy`` input of the Cycles forms and its view table (``nodes.spongecake.budget_table``).
 
 White furnaces are estimated with the reference's own stratified estimator (``furnace_albedo``, 4096 directions per
 view: about 0.3 % noise; 16384 where a test bounds the largest value) and with the numpy prediction of what Cycles
@@ -128,8 +128,11 @@ def test_the_energy_input_is_fed_the_forms_budget_over_the_view(form):
     least."""
     p = _params({"layers": WHITE["back-scattering medium"]})
     table = mapping.view_inputs(p, form)[mapping.MS_ENERGY_INPUT]
-    assert table is mapping.energy_table(p, form) and table.shape == (model.VIEW_ENERGY_GRID[0], 1)
+    assert table.shape == (model.VIEW_ENERGY_GRID[0], 1)
     energy = table.values
+    rows = np.asarray(model.view_table_cosines(table.shape[0]))
+    at_rows = table.at(spherical(rows, np.linspace(0.0, 6.0, len(rows))))  # any azimuth: one column
+    np.testing.assert_allclose(at_rows, energy[:, 0], rtol=1e-6)
     assert np.all(np.isfinite(energy)) and np.min(energy) >= 1.0  # a budget: 1 + the scale (here nothing is capped)
     assert np.ptp(energy) > 0.01  # a view-dependent scale, not a constant
     np.testing.assert_array_equal(mapping.ms_values(p, form)[mapping.MS_ENERGY_INPUT], energy.min(axis=(0, 1)))
@@ -262,7 +265,7 @@ def test_extremes_give_finite_non_negative_scales(layer, form):
     above, below = ref.energy_tables(p)
     assert np.all(np.isfinite(above)) and np.all(np.isfinite(below))
     assert above.min() >= 0.0 and below.min() >= 0.0
-    energy = mapping.energy_table(p, form).values
+    energy = mapping.budget_table(p, form).values
     assert np.all(np.isfinite(energy)) and energy.min() >= 0.0
 
 
@@ -295,7 +298,7 @@ def test_the_cycles_forms_follow_the_azimuth_of_oriented_stacks(form, monkeypatc
     wo = spherical(np.cos(np.radians(rng.uniform(0.0, 85.0, 48))), rng.uniform(0.0, 2.0 * np.pi, 48))
     a = _form_furnace(p, form, wo)
     assert np.mean(np.abs(a - 1.0)) <= 0.008 and a.max() <= 1.015, a[:, 0]
-    table = mapping.energy_table(p, form)
+    table = mapping.budget_table(p, form)
     assert table.shape == model.VIEW_ENERGY_GRID
     least = ViewTable(table.values.min(axis=1, keepdims=True), table.lowest)
     monkeypatch.setattr(mapping, "view_inputs", lambda q, f: {mapping.MS_ENERGY_INPUT: least})
