@@ -313,10 +313,12 @@ def _set_orientation(mat, value):
     node.inputs[material.socket_key(node, "L1 Orientation")].default_value = value
 
 
-def test_a_saved_oriented_stack_renders_the_same_without_lamina(tmp_path):
-    p = model.params_from_dict(TILTED)
-    blend = tmp_path / "tilted.blend"
-    blend_io.write_material_blend(model.ID, p, "nodes", "tilted", str(blend))
-    here, fresh = renders_with_and_without_lamina(blend, "Lamina tilted", tmp_path)
+@pytest.mark.parametrize("orientation, form", [([0.8, 0.0, 0.6], "nodes"), ([0.0, 0.0, 1.0], "osl")])
+def test_a_saved_stack_with_multiple_scattering_renders_the_same_without_lamina(orientation, form, tmp_path):
+    """Its ``MS Energy`` table (over the azimuth too where the layer is oriented) is packed into the file."""
+    p = model.params_from_dict({**TILTED, "layers": [{**TILTED["layers"][0], "orientation": orientation}]})
+    blend = tmp_path / "ms.blend"
+    blend_io.write_material_blend(model.ID, p, form, "ms", str(blend))
+    here, fresh = renders_with_and_without_lamina(blend, "Lamina ms", tmp_path)
     assert here.mean() > 1e-3
     np.testing.assert_array_equal(here, fresh)
