@@ -39,6 +39,11 @@ def fed(socket) -> bool:
     return any(link.from_node.get(VIEW_TAG) for link in socket.links)
 
 
+def lookups(tree) -> list:
+    """Lamina's view-table nodes in ``tree``: the Image Texture nodes and their coordinate groups."""
+    return [n for n in tree.nodes if n.get(VIEW_TAG)]
+
+
 def _image_name(tex) -> str | None:
     return getattr(getattr(tex, "image", None), "name", None)
 
@@ -97,7 +102,7 @@ def _coordinates(b: NodeBackend, sx, ox, sy, oy, over_azimuth: bool):
 def _unused(tree) -> list:
     """Lamina's lookup nodes that feed nothing: Image Textures without links out, and coordinate groups that feed
     only those."""
-    lookups = [n for n in tree.nodes if n.get(VIEW_TAG)]
-    idle = [n for n in lookups if n.bl_idname == "ShaderNodeTexImage" and not n.outputs["Color"].is_linked]
-    return idle + [n for n in lookups if n.bl_idname == "ShaderNodeGroup"
+    ours = lookups(tree)
+    idle = [n for n in ours if n.bl_idname == "ShaderNodeTexImage" and not n.outputs["Color"].is_linked]
+    return idle + [n for n in ours if n.bl_idname == "ShaderNodeGroup"
                    and all(link.to_node in idle for o in n.outputs for link in o.links)]

@@ -1,13 +1,13 @@
 """Helpers of the Blender tests that render (imported like tests/unit/stats.py): a Cycles render of a material on a
-comparison scene, its relative error against a prediction, a material made of one OSL closure, and a saved .blend
-rendered with and without Lamina."""
+comparison scene, its relative error against a prediction, a material made of one OSL closure, a saved .blend
+rendered with and without Lamina, and the kinds of a material's view-table nodes."""
 import os
 import subprocess
 import sys
 
 import bpy  # noqa: F401  (Blender first: the add-on's Cycles layer imports it)
 
-from addon.nodes import osl
+from addon.nodes import osl, view_wiring
 from addon.nodes.material import empty_material
 from addon.operators.cycles_render import render_cycles
 from addon.reference import metrics
@@ -86,3 +86,8 @@ def closure_material(closure: str):
     tree.links.new(node.outputs["BSDF"], out.inputs["Surface"])
     tree.links.new(tree.nodes.new("ShaderNodeNewGeometry").outputs["Tangent"], node.inputs["LaminaTangent"])
     return mat
+
+
+def view_lookup_kinds(mat) -> list[str]:
+    """The sorted node types of Lamina's view-table lookups in ``mat`` (an Image Texture and its coordinates)."""
+    return sorted(n.bl_idname for n in view_wiring.lookups(mat.node_tree))

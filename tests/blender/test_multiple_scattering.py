@@ -11,13 +11,13 @@ bpy = pytest.importorskip("bpy")
 import addon  # noqa: E402
 from addon import presets  # noqa: E402
 from addon.models import spongecake as model  # noqa: E402
-from addon.nodes import MAPPINGS, material, predicted_image, view_wiring  # noqa: E402
+from addon.nodes import MAPPINGS, material, predicted_image  # noqa: E402
 from addon.nodes.spongecake import ms_values  # noqa: E402
 from addon.operators import blend_io, ms_ops  # noqa: E402
 from addon.operators.cycles_render import render_cycles  # noqa: E402
 from addon.reference import metrics  # noqa: E402
 from addon.reference import scenes as S  # noqa: E402
-from renders import relative_error, render, renders_with_and_without_lamina  # noqa: E402
+from renders import relative_error, render, renders_with_and_without_lamina, view_lookup_kinds  # noqa: E402
 from ui_helpers import panel_text  # noqa: E402
 
 pytestmark = pytest.mark.blender
@@ -275,21 +275,17 @@ def test_an_oriented_stack_renders_its_energy_table_over_the_view(form, tmp_path
     assert image not in bpy.data.images
 
 
-def _lookups(mat):
-    return sorted(n.bl_idname for n in mat.node_tree.nodes if n.get(view_wiring.VIEW_TAG))
-
-
 def _table_images(mat):
     return {n.image.name for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeTexImage"}
 
 
 def test_the_view_table_follows_rebakes_and_forms_and_leaves_the_users_links_alone():
     mat = material.new_material(model.ID, model.params_from_dict(TILTED), "nodes")
-    assert _lookups(mat) == ["ShaderNodeGroup", "ShaderNodeTexImage"]
+    assert view_lookup_kinds(mat) == ["ShaderNodeGroup", "ShaderNodeTexImage"]
     (first,) = _table_images(mat)
     material.set_form(mat, "osl")  # the lookup moves to the new node: still one
     node = material.shader_node(mat)
-    assert _lookups(mat) == ["ShaderNodeGroup", "ShaderNodeTexImage"]
+    assert view_lookup_kinds(mat) == ["ShaderNodeGroup", "ShaderNodeTexImage"]
     assert node.inputs["MS_Energy"].links[0].from_node.image.name == first
     _set_thickness(mat, 1.5)  # a new table: a new image, the old one removed
     assert material.bake_constants(mat)
@@ -304,7 +300,7 @@ def test_the_view_table_follows_rebakes_and_forms_and_leaves_the_users_links_alo
     mat.node_tree.links.new(mine.outputs[0], node.inputs["MS_Energy"])  # the user's own link replaces the lookup
     _set_thickness(mat, 2.5)
     assert material.bake_constants(mat)
-    assert _lookups(mat) == [] and third not in bpy.data.images  # the idle lookup went, with its image
+    assert view_lookup_kinds(mat) == [] and third not in bpy.data.images  # the idle lookup went, with its image
     assert node.inputs["MS_Energy"].links[0].from_node == mine
 
 

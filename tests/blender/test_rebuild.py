@@ -12,6 +12,7 @@ from addon.models import spongecake as model  # noqa: E402
 from addon.nodes import material, osl, texture_wiring, view_wiring  # noqa: E402
 from addon.nodes import spongecake as spongecake_nodes  # noqa: E402
 from addon.operators import bake_ops  # noqa: E402
+from renders import view_lookup_kinds  # noqa: E402
 
 pytestmark = pytest.mark.blender
 LAYER = {"type": "surface", "roughness": 0.3, "thickness": 1.0, "albedo": [0.8, 0.8, 0.8]}
@@ -88,7 +89,7 @@ def _assert_user_setup_kept(mat, names, form):
         assert _feeds(lamina.inputs["LaminaTangent"]) == [(helpers[0].name, "Tangent")]
     else:
         assert helpers == []
-    lookups = {n.name for n in tree.nodes if n.get(view_wiring.VIEW_TAG)}  # the MS Energy table's, with MS on
+    lookups = {n.name for n in view_wiring.lookups(tree)}  # the MS Energy table's, with MS on
     user = {n.name for n in tree.nodes} - {"Lamina"} - {n.name for n in helpers} - lookups
     assert user == set(names.values())  # nothing added, nothing lost
 
@@ -123,14 +124,10 @@ def test_toggling_multiple_scattering_keeps_the_users_nodes_and_links(form):
     material.set_multiple_scattering(mat, False)
     _assert_user_setup_kept(mat, {**names, "ms": ms_value.name}, form)
     assert not any(o.is_linked for o in ms_value.outputs)  # its input is gone: the link with it, not the node
-    assert _view_lookups(mat) == []  # and the MS Energy table's lookup with its image
+    assert view_lookup_kinds(mat) == []  # and the MS Energy table's lookup with its image
     material.set_multiple_scattering(mat, True)
     _assert_user_setup_kept(mat, {**names, "ms": ms_value.name}, form)
-    assert not material.ms_is_stale(mat) and _view_lookups(mat) == ["ShaderNodeGroup", "ShaderNodeTexImage"]
-
-
-def _view_lookups(mat):
-    return sorted(n.bl_idname for n in mat.node_tree.nodes if n.get(view_wiring.VIEW_TAG))
+    assert not material.ms_is_stale(mat) and view_lookup_kinds(mat) == ["ShaderNodeGroup", "ShaderNodeTexImage"]
 
 
 def test_a_lamina_node_in_a_frame_stays_there():
