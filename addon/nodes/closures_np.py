@@ -87,19 +87,30 @@ def ensure_valid_specular_reflection(normal, wo):
     return np.where(valid[:, None], normal, bent)
 
 
+def bent_normal(normal, wo):
+    """A closure's ``normal`` (N, 3, or one for all views) as Cycles uses it: normalised, then
+    ``ensure_valid_specular_reflection``."""
+    n = len(wo)
+    return ensure_valid_specular_reflection(_normalize(np.broadcast_to(normal, (n, 3)).astype(np.float64)), wo)
+
+
+def _in_closure_frame(wi, wo, normal, tangent, n):
+    """``wi`` and ``wo`` in the frame of the closure's bent ``normal`` (``bent_normal``) and ``tangent``."""
+    t, b, nz = _frame(bent_normal(normal, wo), tangent, n)
+
+    def local(v):
+        return np.stack([_dot(v, t), _dot(v, b), _dot(v, nz)], axis=1)
+
+    return local(wi), local(wo)
+
+
 def _ggx(wi, wo, alpha_x, alpha_y, normal, tangent, f0, below_normal: bool, conductor=None):
     """GGX as Cycles evaluates it around the bent ``normal``, as a BSDF w.r.t. z (light above the surface
     only): for light above the closure's normal, or (``below_normal``) for light below it."""
     n = len(wi)
     ax = np.broadcast_to(np.asarray(alpha_x, dtype=float), (n,))
     ay = ax if alpha_y is None else np.broadcast_to(np.asarray(alpha_y, dtype=float), (n,))
-    normal = ensure_valid_specular_reflection(_normalize(np.broadcast_to(normal, (n, 3)).astype(np.float64)), wo)
-    t, b, nz = _frame(normal, tangent, n)
-
-    def local(v):
-        return np.stack([_dot(v, t), _dot(v, b), _dot(v, nz)], axis=1)
-
-    li, lo = local(wi), local(wo)
+    li, lo = _in_closure_frame(wi, wo, normal, tangent, n)
     ok = ((li[:, 2] < 0) if below_normal else (li[:, 2] > 0)) & (lo[:, 2] > 0) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
     h = _normalize(li + lo)
     g2 = 1.0 / (1.0 + ggx_lambda(li, ax, ay) + ggx_lambda(lo, ax, ay))  # Λ depends on cos² only
@@ -237,20 +248,23 @@ def _cycles_alpha(alpha, n):
     return np.clip(np.broadcast_to(np.asarray(alpha, dtype=float), (n,)), 0.0, 1.0)  # clamped at closure setup
 
 
-def beckmann_reflection(wi, wo, alpha, eta=None):
-    """What Cycles renders for a Beckmann reflection closure around the shading normal z, as a BSDF: D G2 / (4 cos θi
-    cos θo), times the dielectric Fresnel F(ωi·h, η) per microfacet when ``eta`` is given (OSL ``dielectric_bsdf``
-    with no transmission tint), else no Fresnel (OSL ``microfacet("beckmann", ...)``, the Glossy BSDF node)."""
+def beckmann_reflection(wi, wo, alpha, eta=None, normal=(0.0, 0.0, 1.0)):
+    """What Cycles renders for a Beckmann reflection closure around ``normal`` (the shading normal z by default;
+    bent as GGX's, ``bent_normal``), as a BSDF w.r.t. z: D G2 / (4 cos(N, ωo) cos θi) (the closure's cosine of ωi
+    included, module docstring), times the dielectric Fresnel F(ωi·h, η) per microfacet when ``eta`` is given (OSL
+    ``dielectric_bsdf`` with no transmission tint), else no Fresnel (OSL ``microfacet("beckmann", ...)``, the Glossy
+    BSDF node)."""
     n = len(wi)
     a = _cycles_alpha(alpha, n)
-    ok = (wi[:, 2] > 0) & (wo[:, 2] > 0)
-    ci, co = np.where(ok, wi[:, 2], 1.0), np.where(ok, wo[:, 2], 1.0)
-    h = _normalize(wi + wo)
+    li, lo = _in_closure_frame(wi, wo, normal, (1.0, 0.0, 0.0), n)
+    ok = (li[:, 2] > 0) & (lo[:, 2] > 0) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    ci, co = np.where(ok, li[:, 2], 1.0), np.where(ok, lo[:, 2], 1.0)
+    h = _normalize(li + lo)
     g2 = 1.0 / (1.0 + beckmann_lambda(ci, a) + beckmann_lambda(co, a))
-    f = np.where(ok, beckmann_d(h[:, 2], a) * g2 / (4.0 * ci * co), 0.0)
+    f = np.where(ok, beckmann_d(h[:, 2], a) * g2 / (4.0 * np.where(ok, wi[:, 2], 1.0) * co), 0.0)
     f = np.repeat(f[:, None], 3, axis=1)
     if eta is not None:
-        f = f * microfacet.fresnel_dielectric(_dot(wi, h), np.broadcast_to(np.asarray(eta, dtype=float), (n,)))[:, None]
+        f = f * microfacet.fresnel_dielectric(_dot(li, h), np.broadcast_to(np.asarray(eta, dtype=float), (n,)))[:, None]
     return f
 
 
@@ -379,22 +393,24 @@ def _slope_albedo(wo, alpha, normal, scatter, halton):
     return out
 
 
-def beckmann_reflection_albedo(wo, alpha, eta=None):
-    """Directional albedo (N, 3) of ``beckmann_reflection``: ∫ f cos θi dωi by slope quadrature."""
+def beckmann_reflection_albedo(wo, alpha, eta=None, normal=(0.0, 0.0, 1.0)):
+    """Directional albedo (N, 3) of ``beckmann_reflection``: ∫ f cos θi dωi by slope quadrature around the bent
+    normal, counting the light above the surface and the closure normal."""
     n = len(wo)
     eta_n = None if eta is None else np.broadcast_to(np.asarray(eta, dtype=float), (n,))
+    bent = bent_normal(normal, wo)
 
     def scatter(h, v, rows):
         wi = 2.0 * _dot(h, v)[:, None] * h - v
-        weight = ((wi[:, 2] > 0) & (_dot(h, v) > 0)).astype(float)
+        weight = ((wi[:, 2] > 0) & (_dot(h, v) > 0) & (_dot(wi, bent[rows]) > 0)).astype(float)
         if eta_n is not None:
             weight = weight * microfacet.fresnel_dielectric(_dot(wi, h), eta_n[rows])
         return wi, weight
 
-    out = np.repeat(_microfacet_albedo(wo, alpha, (0.0, 0.0, 1.0), scatter)[:, None], 3, axis=1)
+    out = np.repeat(_microfacet_albedo(wo, alpha, bent, scatter)[:, None], 3, axis=1)
     rough = _cycles_alpha(alpha, n) >= GRID_ALPHA
     if rough.any():
-        grid = _grid_albedo(beckmann_reflection, wo, {"alpha": alpha, "eta": eta}, rough)
+        grid = _grid_albedo(beckmann_reflection, wo, {"alpha": alpha, "eta": eta, "normal": bent}, rough)
         out = np.where(rough[:, None], grid, out)
     return out
 

@@ -180,13 +180,13 @@ class NumpyBackend(NumpyMath):
     def dielectric(self, color, alpha, ior):
         self._add("dielectric", color, alpha=alpha, ior=ior)
 
-    def beckmann(self, color, alpha, eta=None):
-        """Beckmann reflection around the shading normal; with ``eta`` the dielectric Fresnel per microfacet (Blender
-        4.2's node group: its mean over the lobe, ``lobe_fresnel``)."""
+    def beckmann(self, color, alpha, eta=None, normal=None):
+        """Beckmann reflection around ``normal`` (a direction; the shading normal by default); with ``eta`` the
+        dielectric Fresnel per microfacet (Blender 4.2's node group: its mean over the lobe, ``lobe_fresnel``)."""
         if eta is not None and self.form == "nodes":
             color, eta = (self._grey(color, MAX_MIX_WEIGHT), eta) if self.metallic_node else (
                 lobe_fresnel(self, color, eta, alpha), None)
-        self._add("beckmann", color, alpha=alpha, eta=eta)
+        self._add("beckmann", color, alpha=alpha, eta=eta, **({} if normal is None else {"normal": normal}))
 
     def beckmann_refraction(self, color, alpha, ior, normal):
         """Beckmann refraction without Fresnel around ``normal`` (a direction) into a medium of relative ``ior``."""
@@ -275,7 +275,7 @@ def closure_furnace(backend_at, wo: np.ndarray, quadrature=(64, 128), quadrature
 
 
 class OslValue:
-    """An OSL expression string with its type ("float" or "color")."""
+    """An OSL expression string with its type ("float", "color", or "vector" / "normal" for directions)."""
 
     def __init__(self, code: str, kind: str):
         self.code = code
@@ -285,7 +285,8 @@ class OslValue:
         if not isinstance(other, (OslValue, int, float, tuple, list)):
             return NotImplemented  # e.g. a lazy value of a mapping's own (nodes.thin_coat) takes over
         o = _osl(other)
-        kind = "color" if "color" in (self.kind, o.kind) else "float"
+        kinds = (self.kind, o.kind)
+        kind = "vector" if {"vector", "normal"} & set(kinds) else "color" if "color" in kinds else "float"
         a, b = (o, self) if swap else (self, o)
         return OslValue(f"({a.code} {op} {b.code})", kind)
 
@@ -462,7 +463,8 @@ class OslBackend:
         return self._call("min", a, b)
 
     def scale(self, color, s):
-        return self._let(_osl(color) * s, "color")
+        product = _osl(color) * s
+        return self._let(product, "vector" if product.kind == "vector" else "color")
 
     def _closure(self, color, call: str):
         self.closures.append(f"{_osl(color).code} * {call}")
@@ -515,12 +517,12 @@ class OslBackend:
         self._closure(1.0, f'dielectric_bsdf(N, Tn, {_osl(color).code}, {_osl(color).code}, {a}, {a}, '
                            f'{_osl(ior).code}, "ggx")')
 
-    def beckmann(self, color, alpha, eta=None):
-        a = _osl(alpha).code
+    def beckmann(self, color, alpha, eta=None, normal=None):
+        a, n = _osl(alpha).code, "N" if normal is None else normal.code
         if eta is None:
-            self._closure(color, f'microfacet("beckmann", N, Tn, {a}, {a}, 1.0, 0)')
+            self._closure(color, f'microfacet("beckmann", {n}, Tn, {a}, {a}, 1.0, 0)')
         else:  # reflection only: no transmission tint
-            self._closure(1.0, f'dielectric_bsdf(N, Tn, {_osl(color).code}, color(0), {a}, {a}, {_osl(eta).code}, '
+            self._closure(1.0, f'dielectric_bsdf({n}, Tn, {_osl(color).code}, color(0), {a}, {a}, {_osl(eta).code}, '
                                f'"beckmann")')
 
     def beckmann_refraction(self, color, alpha, ior, normal):

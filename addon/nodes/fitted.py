@@ -162,7 +162,9 @@ def narrow_lobes(closures, view: int) -> list[Lobe]:
             beckmann = False
         elif kind in ("beckmann", "conductor", "dielectric"):
             ax = ay = float(np.ravel(kw["alpha"])[view] if np.ndim(kw["alpha"]) else kw["alpha"])
-            normal, tangent, beckmann = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]), kind == "beckmann"
+            normal = np.asarray(kw.get("normal", (0.0, 0.0, 1.0)), dtype=float)
+            normal = normal[view] if normal.ndim == 2 else normal
+            tangent, beckmann = np.array([1.0, 0.0, 0.0]), kind == "beckmann"
         else:
             continue
         ax, ay = max(ax, 1e-4), max(ay, 1e-4)

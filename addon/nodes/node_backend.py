@@ -8,7 +8,7 @@ import bpy
 from .expr import (BULK_INPUT, MAX_CONDUCTOR_WEIGHT, MAX_MIX_WEIGHT, METAL_MIN_RATIO, MIN_COS, MIN_LOG, MIN_TANGENT,
                    lobe_fresnel, schlick_at_view)
 
-GENERATOR_VERSION = 8  # bump when generated shaders change, so cached groups are not reused
+GENERATOR_VERSION = 9  # bump when generated shaders change, so cached groups are not reused
 COLUMN = 190
 ROW = 150
 
@@ -439,21 +439,23 @@ class NodeBackend:
             self.links.new(metal.outputs[0], mix.inputs[2])
             self._add(mix.outputs[0], max(_depth(part), depth) + 1)
 
-    def beckmann(self, color, alpha, eta=None):
-        """Beckmann reflection around the shading normal. Without ``eta``: a Glossy BSDF (Beckmann, no Fresnel). With
-        ``eta`` (the dielectric Fresnel per microfacet; ``color`` must be grey): Blender 4.3+'s Metallic BSDF (Beckmann,
-        physical conductor of IOR η and extinction 0, whose Fresnel is then the dielectric one) scaled by Mix and Add
-        Shaders (``_scaled``); Blender 4.2 has no such node: a Glossy BSDF whose colour takes the lobe's mean Fresnel
-        (``lobe_fresnel``)."""
+    def beckmann(self, color, alpha, eta=None, normal=None):
+        """Beckmann reflection around ``normal`` (a direction; the shading normal by default). Without ``eta``: a
+        Glossy BSDF (Beckmann, no Fresnel). With ``eta`` (the dielectric Fresnel per microfacet; ``color`` must be
+        grey): Blender 4.3+'s Metallic BSDF (Beckmann, physical conductor of IOR η and extinction 0, whose Fresnel is
+        then the dielectric one) scaled by Mix and Add Shaders (``_scaled``); Blender 4.2 has no such node: a Glossy
+        BSDF whose colour takes the lobe's mean Fresnel (``lobe_fresnel``)."""
+        at_normal = {} if normal is None else {"Normal": normal}
         if eta is None or not hasattr(bpy.types, "ShaderNodeBsdfMetallic"):
             if eta is not None:
                 color = lobe_fresnel(self, color, eta, alpha)
-            self._closure("ShaderNodeBsdfGlossy", {"Color": color, "Roughness": self._roughness(alpha)},
+            self._closure("ShaderNodeBsdfGlossy", {"Color": color, "Roughness": self._roughness(alpha), **at_normal},
                           distribution="BECKMANN")
             return
-        depth = _depth(color, alpha, eta) + 1
+        depth = _depth(color, alpha, eta, *at_normal.values()) + 1
         metal = self._node("ShaderNodeBsdfMetallic", depth, distribution="BECKMANN", fresnel_type="PHYSICAL_CONDUCTOR")
-        for name, value in {"Roughness": self._roughness(alpha), "IOR": eta, "Extinction": (0.0, 0.0, 0.0)}.items():
+        for name, value in {"Roughness": self._roughness(alpha), "IOR": eta, "Extinction": (0.0, 0.0, 0.0),
+                            **at_normal}.items():
             self._link_or_set(value, metal.inputs[name])
         gray = self._vector("DOT_PRODUCT", color, (1.0 / 3.0,) * 3, out="Value") if _kind(color) == "color" else color
         self._scaled(metal.outputs[0], gray, depth)

@@ -336,11 +336,11 @@ def measured_errors(name: str) -> dict:
 
 # Measured by ``measured_errors`` (bpy 5.0 node group; the forms differ only by the node group's A3⁻¹), + 25% + 0.01.
 THRESHOLDS = {
-    "amber_lacquer": {"sphere": 0.17, "plane": 0.24, "backlit": 0.01, "furnace": 0.06},
+    "amber_lacquer": {"sphere": 0.14, "plane": 0.23, "backlit": 0.01, "furnace": 0.06},
     "glazed_ceramic": {"sphere": 0.1, "plane": 0.055, "backlit": 0.01, "furnace": 0.02},
-    "rough_over_smooth": {"sphere": 0.17, "plane": 0.22, "backlit": 0.01, "furnace": 0.055},
-    "smooth_over_rough": {"sphere": 0.69, "plane": 0.57, "backlit": 0.01, "furnace": 0.017},
-    "varnished_metal": {"sphere": 0.2, "plane": 0.46, "backlit": 0.01, "furnace": 0.04},
+    "rough_over_smooth": {"sphere": 0.12, "plane": 0.21, "backlit": 0.01, "furnace": 0.055},
+    "smooth_over_rough": {"sphere": 0.69, "plane": 0.51, "backlit": 0.01, "furnace": 0.017},
+    "varnished_metal": {"sphere": 0.07, "plane": 0.13, "backlit": 0.01, "furnace": 0.045},
     "waxed_floor": {"sphere": 0.1, "plane": 0.05, "backlit": 0.01, "furnace": 0.05},
 }
 
@@ -348,8 +348,9 @@ THRESHOLDS = {
 @pytest.mark.parametrize("name", PRESETS)
 def test_form_error_against_the_reference_stays_within_its_measured_bound(name):
     """Where the errors come from (docs: the named approximations): rough tops (amber, rough_over_smooth: κ1 = 10)
-    surface-as-beckmann; the rough bottom of smooth_over_rough (κ2 = 10) and the grazing views of varnished_metal
-    endf-as-beckmann (wide ENDF lobes); the diffuse bases the sun's light-side factor (diffuse-entry-mean)."""
+    surface-as-beckmann; the rough bottom of smooth_over_rough (κ2 = 10) endf-as-beckmann (wide ENDF lobes, beyond
+    the first-order tilt of the closure normal that brought varnished_metal's plane from 0.35 to 0.09); the diffuse
+    bases the sun's light-side factor (diffuse-entry-mean)."""
     assert set(THRESHOLDS) == set(PRESETS)
     for (scene, form), err in measured_errors(name).items():
         assert err <= THRESHOLDS[name][scene], f"{name} {scene} {form}: {err:.4f}"
