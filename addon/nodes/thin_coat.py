@@ -91,8 +91,9 @@ APPROXIMATIONS = {
                                  "mean over the lobe by a fit, not per microfacet (the bench predicts 4.3+: measured "
                                  "in tests/unit/test_thin_coat_mapping.py)",
                                  _config(kappa_top=30.0, bounces=0)),
-    "endf-as-beckmann": ("each reflection order's ENDF vMF lobe rendered as Beckmann with Cycles' G2, scaled to "
-                         "its energy by a fit (α ≤ 1, κ̂ ≤ 1e6)",
+    "endf-as-beckmann": ("each reflection order's ENDF vMF lobe rendered as Beckmann with Cycles' G2 about a normal "
+                         "leaning away from the view (the ENDF's 1 / (o·h) to first order), scaled to its energy by "
+                         "a fit (α ≤ 1, κ̂ ≤ 1e6)",
                          _config(kappa_top=1e6, kappa_bottom=30.0, bounces=2)),
     "diffuse-entry-mean": ("a diffuse order's light-side factor (top crossing, absorption) replaced by its "
                            "cosine-weighted hemispherical mean (3 nodes)",

@@ -80,13 +80,13 @@ def test_a_larger_budget_never_costs_more_and_the_smallest_keeps_the_most_accura
 
 def test_fitting_again_after_applying_measures_against_the_material_as_set(varnished):
     p, _ = varnished
-    first = budget.fit_to_budget("thin_coat", p, 0.05, ("nodes",), mappings=("analytic",))
+    first = budget.fit_to_budget("thin_coat", p, 0.1, ("nodes",), mappings=("analytic",))
     assert first.chosen.params.bounces < p.bounces  # a cheaper variant, else this test shows nothing
     record = first.to_json()
     applied = first.chosen.params
     # the values as the material holds them after the rebuild, the bounce count the decision's
     assert budget.target("thin_coat", applied, record) == p
-    again = budget.fit_to_budget("thin_coat", budget.target("thin_coat", applied, record), 0.05, ("nodes",),
+    again = budget.fit_to_budget("thin_coat", budget.target("thin_coat", applied, record), 0.1, ("nodes",),
                                  current=(applied, "nodes", "analytic", first.chosen.pruned), mappings=("analytic",))
     assert again.chosen.to_json() == first.chosen.to_json()
     assert again.current is not None and again.current.to_json() == first.chosen.to_json()
