@@ -474,14 +474,20 @@ def bake_throughput(size: int) -> tuple[str, float]:
     return what, seconds / (size * size / 1e6)
 
 
+# The sampling-only cost: the render at this many times the bench's samples less the render at the bench's samples.
+SAMPLING_FACTOR = 4
+
+
 def ms_render_times(names, samples: int, resolution: int, repeats: int) -> list[dict]:
     """Cycles render time of each preset with and without multiple scattering, both forms, on the sphere scene, at
-    ``samples`` and at twice as many; the renders alternate (SS, SS + MS, ...) and the fastest of ``repeats`` counts.
-    ``<form>`` / ``<form>_ms``: the whole render at ``samples`` (scene sync, shader compilation, kernel set-up and
-    sampling); ``<form>_sampling`` / ``<form>_ms_sampling``: the fastest render at twice the samples less the fastest
-    at ``samples``, the time of ``samples`` samples alone (what shading costs: the set-up is the same in both and
-    cancels). ``<form>_rounds`` / ``<form>_sampling_rounds`` hold each round's ratio SS + MS over SS (their spread is
-    the measurement's)."""
+    ``samples`` and at ``SAMPLING_FACTOR`` times as many, in ``repeats`` rounds (each renders every material at both
+    counts, alternating SS, SS + MS, ...). ``<form>`` / ``<form>_ms``: the fastest whole render at ``samples`` (scene
+    sync, shader compilation, kernel set-up and sampling), ``<form>_ratio`` theirs. ``<form>_sampling`` /
+    ``<form>_ms_sampling``: the median over the rounds of the render at the larger count less the render at
+    ``samples``, the time of the samples between them alone (what shading costs: the set-up is the same in both and
+    cancels), and ``<form>_sampling_ratio`` the median of each round's ratio (a round's renders share the machine's
+    state, so slow drifts cancel too, and the median ignores a round that a hiccup disturbed). ``<form>_rounds`` /
+    ``<form>_sampling_rounds`` hold each round's ratio SS + MS over SS (their spread is the measurement's)."""
     import bpy
 
     from ..nodes import material as lamina_material
@@ -490,7 +496,7 @@ def ms_render_times(names, samples: int, resolution: int, repeats: int) -> list[
 
     spec = ref_scenes.sphere_scene(resolution=resolution)
     path = os.path.join(bpy.app.tempdir, "bench_ms.exr")
-    counts = (samples, 2 * samples)
+    counts = (samples, SAMPLING_FACTOR * samples)
     rows = []
     for name in names:
         data = presets.load(MODEL, name)
@@ -506,16 +512,19 @@ def ms_render_times(names, samples: int, resolution: int, repeats: int) -> list[
                         times[k, n].append(render_cycles(mat, spec, n, 0, path)[1])
         finally:
             blend_io.remove_new_data(before)
-        whole = {k: times[k, samples] for k in mats}
-        sampling = {k: [b - a for a, b in zip(times[k, samples], times[k, 2 * samples])] for k in mats}
+        whole = {k: times[k, counts[0]] for k in mats}
+        sampling = {k: [b - a for a, b in zip(times[k, counts[0]], times[k, counts[1]])] for k in mats}
         row = {"preset": name}
         for form in ("nodes", "osl"):
             for ms, suffix in ((False, ""), (True, "_ms")):
                 row[form + suffix] = min(whole[form, ms])
-                row[form + suffix + "_sampling"] = min(times[(form, ms), 2 * samples]) - min(whole[form, ms])
+                row[form + suffix + "_sampling"] = float(np.median(sampling[form, ms]))
+            row[form + "_ratio"] = row[form + "_ms"] / row[form]
             row[form + "_rounds"] = [m / s for s, m in zip(whole[form, False], whole[form, True])]
             row[form + "_sampling_rounds"] = [m / s for s, m in zip(sampling[form, False], sampling[form, True])
                                               if s > 0.0]
+            rounds = row[form + "_sampling_rounds"]
+            row[form + "_sampling_ratio"] = float(np.median(rounds)) if rounds else float("nan")
         rows.append(row)
     return rows
 
@@ -664,8 +673,10 @@ def ms_speed_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
              "| preset | node group SS s | SS + MS s | ratio | per round | OSL SS s | SS + MS s | ratio | per round |",
              "|---|---|---|---|---|---|---|---|---|"]
     lines += [_speed_row(r, "") for r in rows]
-    lines += ["", f"Sampling alone: the time of {samples} samples, the fastest render at {2 * samples} samples less the "
-              f"fastest at {samples} (the set-up is the same in both and cancels; what shading the material costs):", "",
+    more = SAMPLING_FACTOR * samples
+    lines += ["", f"Sampling alone: the time of {more - samples} samples, each round's render at {more} samples less its "
+              f"render at {samples} (the set-up is the same in both and cancels; what shading the material costs), the "
+              "median over the rounds; the ratio is the median of the rounds' ratios:", "",
               "| preset | node group SS s | SS + MS s | ratio | per round | OSL SS s | SS + MS s | ratio | per round |",
               "|---|---|---|---|---|---|---|---|---|"]
     lines += [_speed_row(r, "_sampling") for r in rows]
@@ -678,6 +689,7 @@ def _speed_row(r: dict, kind: str) -> str:
     cells = [r["preset"]]
     for form in ("nodes", "osl"):
         ss, ms, rounds = r[form + kind], r[form + "_ms" + kind], r[form + kind + "_rounds"]
+        ratio = r[form + kind + "_ratio"]
         spread = f"{min(rounds):.2f}–{max(rounds):.2f}" if rounds else "–"
-        cells += [f"{ss:.2f}", f"{ms:.2f}", f"{ms / ss:.2f}" if ss > 0.0 else "–", spread]
+        cells += [f"{ss:.2f}", f"{ms:.2f}", f"{ratio:.2f}" if np.isfinite(ratio) else "–", spread]
     return "| " + " | ".join(cells) + " |"
