@@ -19,7 +19,7 @@ STEPS = 3000
 
 
 def targets():
-    """(µ, κ̂, α, e0, exact ratio) on ``GRID``."""
+    """(µ, κ̂, α, exact ratio) on ``GRID``."""
     m, k = (a.ravel() for a in np.meshgrid(np.geomspace(0.005, 1.0, GRID[0]), np.geomspace(0.01, 1e4, GRID[1]),
                                            indexing="ij"))
     wo = np.stack([np.sqrt(1.0 - m * m), np.zeros_like(m), m], axis=1)
@@ -29,28 +29,35 @@ def targets():
     return m, k, alpha, mapping.endf_energy(m, k) / albedo
 
 
-def ratio(params, m, k, alpha):
-    """``energy_ratio`` in torch (the same expression)."""
-    c, q, l1, l2 = params
-    g1, g2 = mapping.NORMAL_ALBEDO_FIT
-    k = torch.clamp(k, min=1e-6)
-    e_endf = (1.0 - torch.exp(-(1.0 - 0.5 ** 0.5) * k)) / (1.0 - torch.exp(-2.0 * k))
-    e_beckmann = 1.0 - g1 * torch.exp(-g2 / (alpha * alpha))
-    s = torch.clamp(alpha * torch.sqrt(1.0 - m * m) / m, min=1e-12)
-    limit = 0.5 + l1 * torch.exp(-l2 * k)
-    return e_endf / e_beckmann * (limit + (1.0 - limit) / (1.0 + c * torch.exp(q * torch.log(s))))
+class TorchMath:
+    """The backend operations ``energy_ratio`` uses, on torch tensors (so the fit differentiates the shader's own
+    expression)."""
+    exp, sqrt = staticmethod(torch.exp), staticmethod(torch.sqrt)
+
+    @staticmethod
+    def log(x):
+        return torch.log(torch.clamp(x, min=1e-30))  # s = 0 at normal view, where the term is 1 anyway
+
+    @staticmethod
+    def maximum(x, y):
+        return torch.clamp(x, min=y)
 
 
 def fit() -> tuple[float, ...]:
     m, k, alpha, exact = (torch.tensor(a, dtype=torch.float64) for a in targets())
     params = torch.tensor(mapping.ENERGY_FIT, dtype=torch.float64, requires_grad=True)
     optimiser = torch.optim.Adam([params], lr=3e-3)
-    for _ in range(STEPS):
-        optimiser.zero_grad()
-        error = ratio(params, m, k, alpha) / exact - 1.0
-        loss = torch.mean(error ** 16) ** (1.0 / 16.0)
-        loss.backward()
-        optimiser.step()
+    saved = mapping.ENERGY_FIT
+    try:
+        mapping.ENERGY_FIT = params  # ``energy_ratio`` reads its constants from the module
+        for _ in range(STEPS):
+            optimiser.zero_grad()
+            error = mapping.energy_ratio(TorchMath, m, k, alpha) / exact - 1.0
+            loss = torch.mean(error ** 16) ** (1.0 / 16.0)
+            loss.backward()
+            optimiser.step()
+    finally:
+        mapping.ENERGY_FIT = saved
     return tuple(round(float(x), 4) for x in params.detach())
 
 
