@@ -75,8 +75,10 @@ def mapping_section(model, resolution: int) -> list[str]:
              + f" (backlit only where the reference's mean reaches {choice.BACKLIT_MIN_MEAN:g}).", "",
              "| preset | scene | ref. mean | OSL analytic | OSL Auto | node group analytic | node group Auto | goal |",
              "|---|---|---|---|---|---|---|---|"]
-    summary = ["", f"Fit s: both fits ({', '.join(f'{d:g}' for d in choice.DAMPINGS)} weightings, `nodes.choice`) "
-               "from scratch; measure s: the analytic mapping and both fits on the comparison scenes.", "",
+    summary = ["", f"Fit s: the {len(choice.VARIANTS)} fits (weightings "
+               f"{', '.join(sorted({f'{v.damping:g}' for v in choice.VARIANTS}))}, without and with the Toon lobes, "
+               "`nodes.choice`) from scratch; measure s: the analytic mapping and the distinct fits on the comparison "
+               "scenes.", "",
                "| preset | form | Auto renders | closures analytic → fitted | fit s | measure s |",
                "|---|---|---|---|---|---|"]
     with fresh_fit_cache():
@@ -84,7 +86,7 @@ def mapping_section(model, resolution: int) -> list[str]:
             p = model.params_from_dict(presets.load(model.ID, name))
             chosen = {}
             for form in ("osl", "nodes"):
-                fit_seconds = timed(lambda: [choice.fit_for(model.ID, p, form, d) for d in choice.DAMPINGS])
+                fit_seconds = timed(lambda: [choice.fit_for(model.ID, p, form, v) for v in choice.VARIANTS])
                 start = time.perf_counter()
                 chosen[form] = choice.choose(model.ID, p, form, "auto")
                 fit = choice.choose(model.ID, p, form, "fitted").fit
@@ -123,7 +125,7 @@ def driven_section(model, cases, resolution: int) -> list[str]:
             for v in (0.5 * (values[0] + values[1]), 0.5 * (values[-2] + values[-1])):
                 q = choice.at(model.ID, p, fitted.Driven(socket, driven.kind, (v,)), 0)
                 shaders = {"interpolated": ("nodes", made.fit),
-                           "direct": ("nodes", choice.fit_for(model.ID, q, "nodes", made.damping)),
+                           "direct": ("nodes", choice.fit_for(model.ID, q, "nodes", made.variant)),
                            "analytic": ("nodes", None)}
                 errors, means = comparison_errors(model.ID, q, shaders, resolution, ALBEDO_SAMPLES, furnace_width=None)
                 cells = " | ".join(pct(choice.counted(errors[label], means)) for label in shaders)

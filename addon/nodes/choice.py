@@ -1,14 +1,14 @@
 """Which mapping a material renders with: analytic, fitted, or Auto (bpy-free).
 
-``fit_for`` fits the material against the model's float64 reference (``fitted.fit``, one fit per residual
-weighting of ``DAMPINGS``), cached by content (parameters, form, fitter version) in memory and on disk. ``choose``
-measures the analytic mapping and each fit on the comparison scenes at ``CHOICE_RESOLUTION`` (the scenes and
-resolution ``make bench`` reports; a smaller furnace): the Fitted mapping is the closer fit, and Auto keeps the
-analytic one unless the fitted one is lower by ``AUTO_MARGIN``.
+``fit_for`` fits the material against the model's float64 reference (``fitted.fit``, one fit per ``VARIANTS``:
+residual weighting and dictionary), cached by content (parameters, form, fitter version) in memory and on disk.
+``choose`` measures the analytic mapping and each distinct fit on the comparison scenes at ``CHOICE_RESOLUTION`` (the
+scenes and resolution ``make bench`` reports; a smaller furnace): the Fitted mapping is the closest fit, and Auto
+keeps the analytic one unless the fitted one is lower by ``AUTO_MARGIN``.
 
 A texture-driven or keyframed input (``driven``: ``fitted.Driven``, ``driven_over``) is tabulated at
 ``DRIVEN_VALUES`` values across its range (``fitted.fit_driven``). The choice is measured at the middle value, with
-the fits of that value; the winning residual weighting is then fitted at every value.
+the fits of that value; the winning variant is then fitted at every value.
 """
 from __future__ import annotations
 
@@ -22,16 +22,13 @@ import numpy as np
 
 from . import MAPPINGS, fittable, fitted, predicted_image
 
-FITTER_VERSION = 5  # bump when fits change, so cached ones are not reused
+FITTER_VERSION = 6  # bump when fits change, so cached ones are not reused
 CHOICE_RESOLUTION = 48
 CHOICE_FURNACE_WIDTH = 12  # the furnace panorama's width (the bench's is 24: its prediction costs an albedo per pixel)
 AUTO_MARGIN = 0.01  # Auto takes the fitted mapping only where it is lower by this much (absolute rel. RMSE)
 BACKLIT_MIN_MEAN = 1e-3  # a scene whose reference mean is below this is not counted (e.g. backlit opaque stacks)
 REFERENCE_ALBEDO_SAMPLES = 4096  # the reference's directional albedo per fitted view
 SCENE_ALBEDO_SAMPLES = 1024  # per furnace pixel in the choice's scenes
-# The residual weightings fitted (``fitted.fit``'s damping): relative errors, and halfway to absolute ones. Neither
-# is best for every material, so both are fitted and the Fitted mapping is the one closer on the comparison scenes.
-DAMPINGS = (1.0, 0.5)
 DRIVEN_VALUES = 5  # tabulated values of a driven input (odd: the middle one is where the choice is measured)
 _fits: dict[str, fitted.Fit] = {}
 
@@ -75,12 +72,30 @@ def reference_of(model_id: str):
     return importlib.import_module(f"..reference.{model_id}", __package__)
 
 
-def fit_for(model_id: str, p, form: str, damping: float = DAMPINGS[0], driven: fitted.Driven | None = None,
+@dataclass(frozen=True)
+class Variant:
+    """One of a material's fits: the residual weighting (``fitted.fit``'s damping) and whether the dictionary holds
+    the Toon lobes (``fitted.TOONS``)."""
+    damping: float
+    toons: bool = False
+
+    @property
+    def label(self) -> str:
+        return f"fitted {self.damping:g}" + " with toons" * self.toons
+
+
+# The fits tried: relative errors and halfway to absolute ones, each without and with the Toon lobes. No weighting is
+# best for every material, and the Toon lobes can mislead the fit's greedy choice (``fitted.TOONS``), so each is
+# fitted and the Fitted mapping is the one closest on the comparison scenes.
+VARIANTS = tuple(Variant(d, toons) for toons in (False, True) for d in (1.0, 0.5))
+
+
+def fit_for(model_id: str, p, form: str, variant: Variant = VARIANTS[0], driven: fitted.Driven | None = None,
             progress=None) -> fitted.Fit:
-    """The fit of ``p`` in ``form`` with the residual weighting ``damping`` (``fitted.fit``; ``fitted.fit_driven``
-    over a ``driven`` input, reporting ``progress(fraction)``), cached in memory and in ``cache_folder`` (an
-    unreadable cache file is refitted and replaced)."""
-    key = f"{fit_key(model_id, p, form, driven)}-{damping:g}"
+    """The fit of ``p`` in ``form`` of ``variant`` (``fitted.fit``; ``fitted.fit_driven`` over a ``driven`` input,
+    reporting ``progress(fraction)``), cached in memory and in ``cache_folder`` (an unreadable cache file is refitted
+    and replaced)."""
+    key = f"{fit_key(model_id, p, form, driven)}-{variant.damping:g}{'-toons' * variant.toons}"
     if key in _fits:
         return _fits[key]
     path = cache_folder() / f"{key}.npz"
@@ -99,10 +114,10 @@ def fit_for(model_id: str, p, form: str, damping: float = DAMPINGS[0], driven: f
                 lambda wo: ref.furnace_albedo(q, wo, n=REFERENCE_ALBEDO_SAMPLES))
 
     if driven is None:
-        result = fitted.fit(*problem(p), form, damping)
+        result = fitted.fit(*problem(p), form, variant.damping, variant.toons)
     else:
         problems = [problem(at(model_id, p, driven, j)) for j in range(len(driven.values))]
-        result = fitted.fit_driven(problems, driven, form, damping, progress)
+        result = fitted.fit_driven(problems, driven, form, variant.damping, variant.toons, progress)
     _cache_write(path, lambda f: np.savez(f, **result.to_arrays()))
     _fits[key] = result
     return result
@@ -124,13 +139,13 @@ def _cache_write(path: Path, write) -> None:
 class Choice:
     """The mapping a material renders with: ``used`` ("analytic" or "fitted"), its ``fit`` (None for analytic),
     and the comparison scenes' errors of both (``errors[mapping][scene]``, ``error[mapping]`` their mean over the
-    scenes that count, ``means[scene]`` the reference's); ``damping``: the residual weighting of the closer fit."""
+    scenes that count, ``means[scene]`` the reference's); ``variant``: that of the closest fit."""
     used: str
     fit: fitted.Fit | None
     errors: dict = field(default_factory=dict)
     error: dict = field(default_factory=dict)
     means: dict = field(default_factory=dict)
-    damping: float | None = None
+    variant: Variant | None = None
 
     @property
     def note(self) -> str:
@@ -210,14 +225,14 @@ def choose(model_id: str, p, form: str, mapping: str = "auto", driven: fitted.Dr
     if driven is not None:
         made = choose(model_id, at(model_id, p, driven, len(driven.values) // 2), form, mapping)
         if made.used == "fitted":
-            made.fit = fit_for(model_id, p, form, made.damping, driven, progress)
+            made.fit = fit_for(model_id, p, form, made.variant, driven, progress)
         return made
-    fits = {d: fit_for(model_id, p, form, d) for d in DAMPINGS}
-    labels = {d: f"fitted {d:g}" for d in DAMPINGS}
-    errors, means = _measured(model_id, p, form, {labels[d]: f for d, f in fits.items()})
+    fits = {v: fit_for(model_id, p, form, v) for v in VARIANTS}
+    distinct = list({f.digest(): v for v, f in reversed(fits.items())}.values())  # alike fits: the first variant
+    errors, means = _measured(model_id, p, form, {v.label: fits[v] for v in distinct})
     error = {name: counted(e, means) for name, e in errors.items()}
-    best = min(fits, key=lambda d: error[labels[d]])
-    errors, error = ({"analytic": e["analytic"], "fitted": e[labels[best]]} for e in (errors, error))
+    best = min(distinct, key=lambda v: (error[v.label], VARIANTS.index(v)))
+    errors, error = ({"analytic": e["analytic"], "fitted": e[best.label]} for e in (errors, error))
     used = "fitted" if mapping == "fitted" or error["fitted"] < error["analytic"] - AUTO_MARGIN else "analytic"
     return Choice(used, fits[best] if used == "fitted" else None, errors, error, means, best)
 

@@ -202,6 +202,38 @@ def velvet(wi, wo, sigma):
     return np.repeat(f[:, None], 3, axis=1)
 
 
+TOON_MIN_SIZE = 1e-5  # Cycles clamps a toon closure's Size to [1e-5, 1] at setup
+
+
+def _toon(wi, wo, axis, size, smooth):
+    """Cycles' Toon BSDF (kernel closure/bsdf_toon.h, the same in 4.2 and 5.0) as a BSDF, the cosine w.r.t. z
+    divided out: Cycles evaluates f · cos θi = I(γ) / (2π (1 − cos S)), γ the angle between ωi and ``axis``,
+    I = 1 within a = size · π/2 and falling linearly to 0 over s = smooth · π/2 more, S = min(a + s, π/2) the cone
+    it samples; zero outside that cone and where ωi or ωo is below the surface. No cosine falloff and no masking:
+    light at grazing incidence counts fully (a wide lobe without Smith's shadowing)."""
+    a = np.clip(size, TOON_MIN_SIZE, 1.0) * (0.5 * np.pi)
+    s = np.clip(smooth, 0.0, 1.0) * (0.5 * np.pi)
+    cone = min(a + s, 0.5 * np.pi)
+    ok = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    angle = np.arccos(np.clip(_dot(wi, axis), -1.0, 1.0))
+    falloff = 1.0 - (angle - a) / s if s > 0.0 else np.zeros_like(angle)
+    intensity = np.where(angle < a, 1.0, np.where(angle < a + s, falloff, 0.0))
+    ci = np.where(ok, wi[:, 2], 1.0)
+    f = np.where(ok & (angle < cone), intensity / (2.0 * np.pi * (1.0 - np.cos(cone)) * ci), 0.0)
+    return np.repeat(f[:, None], 3, axis=1)
+
+
+def glossy_toon(wi, wo, size, smooth):
+    """Cycles' glossy Toon BSDF around z (``_toon`` about the mirror direction of ωo)."""
+    return _toon(wi, wo, wo * np.array([-1.0, -1.0, 1.0]), size, smooth)
+
+
+def diffuse_toon(wi, wo, size, smooth):
+    """Cycles' diffuse Toon BSDF around z (``_toon`` about the normal): with size 1, f · cos θi = 1 / (2π) over the
+    hemisphere, albedo 1."""
+    return _toon(wi, wo, np.array([0.0, 0.0, 1.0]), size, smooth)
+
+
 def transparent(wi, wo):
     return np.zeros((len(wi), 3))
 
@@ -496,6 +528,8 @@ EVAL = {
     "translucent": translucent,
     "transparent": transparent,
     "velvet": velvet,
+    "glossy_toon": glossy_toon,
+    "diffuse_toon": diffuse_toon,
     "conductor": conductor,
     "dielectric": dielectric,
     "beckmann": beckmann_reflection,

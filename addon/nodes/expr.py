@@ -196,6 +196,14 @@ class NumpyBackend(NumpyMath):
         """Cycles' Ashikhmin velvet around the shading normal (``closures_np.velvet``)."""
         self._add("velvet", color, sigma=sigma)
 
+    def glossy_toon(self, color, size, smooth):
+        """Cycles' glossy Toon BSDF around the shading normal (``closures_np.glossy_toon``)."""
+        self._add("glossy_toon", color, size=size, smooth=smooth)
+
+    def diffuse_toon(self, color, size, smooth):
+        """Cycles' diffuse Toon BSDF around the shading normal (``closures_np.diffuse_toon``)."""
+        self._add("diffuse_toon", color, size=size, smooth=smooth)
+
     def bulk(self, weight):
         """The shader plugged into the ``Bulk`` input, scaled by ``weight``."""
         for kind, color, kw in self._bulk(self.wo).closures:
@@ -531,6 +539,12 @@ class OslBackend:
 
     def velvet(self, color, sigma):
         self._closure(color, f"ashikhmin_velvet(N, {_osl(sigma).code})")
+
+    def glossy_toon(self, color, size, smooth):
+        self._closure(color, f"glossy_toon(N, {_osl(size).code}, {_osl(smooth).code})")
+
+    def diffuse_toon(self, color, size, smooth):
+        self._closure(color, f"diffuse_toon(N, {_osl(size).code}, {_osl(smooth).code})")
 
     def source(self, shader_name: str, header: str) -> str:
         params = ",\n    ".join(f"{_osl_type(kind)} {osl_identifier(name)} = {_osl_default(kind, d)}"

@@ -5,10 +5,10 @@ What a mapping's ``shade`` renders is a sum of closures whose weights depend on 
 keeps those closures (their shapes: narrow peaks, tilted normals, anisotropy) and multiplies each closure's colour
 by an RGB table over the view cosine; it may add up to ``MAX_EXTRAS`` closures from a small dictionary (Lambert,
 translucency, GGX around the normal, Beckmann refraction around the view, Ashikhmin velvet for light between
-grazing directions), each with an RGB weight table, beside the material's closures or in place of one of them: the
-fitted mapping renders at most as many closures as the analytic one (its render cost). Per tabulated view cosine
-the weights minimise the cosine-weighted error against
-the reference over (ωi, ωo) (non-negative least squares), with the reference's own directional albedo matched (a
+grazing directions, Toon lobes for wide lobes that keep grazing light), each with an RGB weight table, beside the
+material's closures or in place of one of them: the fitted mapping renders at most as many closures as the analytic
+one (its render cost). Per tabulated view cosine the weights minimise the cosine-weighted error against the
+reference over (ωi, ωo) (non-negative least squares), with the reference's own directional albedo matched (a
 heavily weighted row). The forward model is ``closures_np``: the fit optimises what Cycles renders. Tables are
 piecewise linear in √cos θo on ``KNOTS`` uniform knots (``view_cosines``; a Color Ramp in node groups, a constant
 array in OSL: both exact).
@@ -63,9 +63,9 @@ def table_coordinate(b):
 
 # ------------------------------------------------------------------------------ the extra closures
 
-def extra_dictionary() -> list[tuple[str, dict]]:
+def extra_dictionary(toons: bool = False) -> list[tuple[str, dict]]:
     """(kind, parameters) of the closures the fit may add, each with a white colour: those whose Cycles rendering
-    ``closures_np`` predicts under suns and in the furnace (tests/blender). Refraction around the normal is not among
+    ``closures_np`` predicts under suns and in the furnace (tests/blender), with ``TOONS`` if ``toons``. Refraction around the normal is not among
     them: under a uniform sky Cycles renders it darker at grazing views than its evaluation integrates to (seen in
     a one-off render, α = 1, IOR 1.5; not yet a test), so its prediction would be off there."""
     up = (0.0, 0.0, 1.0)
@@ -74,7 +74,14 @@ def extra_dictionary() -> list[tuple[str, dict]]:
     out += [("beckmann_refraction", {"alpha": a, "ior": 10.0, "normal": "view"})
             for a in (0.1, 0.2, 0.3, 0.5, 0.7, 1.0)]
     out += [("velvet", {"sigma": s}) for s in (0.2, 0.3, 0.5)]  # wider ones rob the sun-lit views (leaf)
-    return out
+    return out + list(TOONS) if toons else out
+
+
+# Toon lobes keep light at grazing incidence, which every microfacet closure's masking takes away: a tent about the
+# mirror direction 90° wide and a lobe flat over the hemisphere (f cos θi constant) stand in for the wide ENDF lobes
+# of a rough bottom under a smooth top (smooth_over_rough, docs/accuracy.md). Elsewhere they can lower the fit's own
+# error while raising the comparison scenes' (leaf): a dictionary with them is one of the fits ``nodes.choice`` tries.
+TOONS = (("glossy_toon", {"size": 0.0, "smooth": 1.0}), ("diffuse_toon", {"size": 1.0, "smooth": 0.0}))
 
 
 def _extra_kwargs(kind: str, kw: dict, wo: np.ndarray) -> dict:
@@ -425,12 +432,12 @@ def _grey(kind: str, kw: dict, form: str) -> bool:
     return form == "nodes" and (kind == "conductor" or (kind == "beckmann" and kw.get("eta") is not None))
 
 
-def fit(backend_of, ref_eval, ref_albedo, form: str, damping: float = 1.0, groups=None, extras=None,
-        atoms=None) -> Fit:
+def fit(backend_of, ref_eval, ref_albedo, form: str, damping: float = 1.0, toons: bool = False, groups=None,
+        extras=None, atoms=None) -> Fit:
     """Fit the mapping whose view-only closures ``backend_of(wo)`` records (a ``NumpyBackend`` after ``shade``)
     against the reference ``ref_eval(wi, wo)`` (N, 3) and directional albedo ``ref_albedo(wo)`` (N, 3): up to
-    ``MAX_EXTRAS`` extra closures chosen greedily (``_chosen``), each kept only if it lowers the error by
-    ``EXTRA_GAIN``, within the analytic mapping's closure count. The residual at each direction is divided by (the
+    ``MAX_EXTRAS`` extra closures chosen greedily (``_chosen``; from ``extra_dictionary(toons)``), each kept only if
+    it lowers the error by ``EXTRA_GAIN``, within the analytic mapping's closure count. The residual at each direction is divided by (the
     reference's mean level + its value)^``damping``: 1 weighs relative errors (a peak counts no more than the dim
     rest), 0 absolute ones. Given ``groups`` (the atoms), ``extras`` (the extra closures, all used) and ``atoms``
     (which atoms render; all by default), the fit keeps that structure (``fit_driven``)."""
@@ -440,7 +447,7 @@ def fit(backend_of, ref_eval, ref_albedo, form: str, damping: float = 1.0, group
     present = {kind for kind, _, _ in closures}
     fixed = extras is not None
     if not fixed:
-        extras = [(kind, kw) for kind, kw in extra_dictionary() if not (kind in SHAPELESS and kind in present)]
+        extras = [(kind, kw) for kind, kw in extra_dictionary(toons) if not (kind in SHAPELESS and kind in present)]
     n_analytic = 1 + max(groups, default=-1)
     grey = np.zeros(n_analytic + len(extras), dtype=bool)
     for g, (kind, _, kw) in zip(groups, closures):
@@ -506,7 +513,7 @@ def common_groups(backends_of) -> tuple[int, ...]:
     return tuple(labels.setdefault(key, len(labels)) for key in zip(*per_value))
 
 
-def fit_driven(problems, driven: Driven, form: str, damping: float = 1.0, progress=None) -> Fit:
+def fit_driven(problems, driven: Driven, form: str, damping: float = 1.0, toons: bool = False, progress=None) -> Fit:
     """The fit of a texture-driven material: ``problems[j]`` = (backend_of, ref_eval, ref_albedo) with the input at
     ``driven.values[j]``. The middle value chooses the extra closures and the atoms that render; every value is
     fitted with them and the ``common_groups``. ``progress(fraction)`` after each value."""
@@ -517,7 +524,7 @@ def fit_driven(problems, driven: Driven, form: str, damping: float = 1.0, progre
     for done, j in enumerate(order):
         structure = {} if j == middle else {"extras": list(fits[middle].extras),
                                             "atoms": fits[middle].scales.max(axis=(1, 2)) > 0.0}
-        fits[j] = fit(*problems[j], form, damping, groups, **structure)
+        fits[j] = fit(*problems[j], form, damping, toons, groups, **structure)
         if progress is not None:
             progress((done + 1) / len(order))
     ordered = [fits[j] for j in range(len(problems))]
@@ -597,5 +604,5 @@ def shade(b, mapping, p, fit: Fit) -> None:
             b.glossy(color, kw["alpha"], kw["alpha"], b.normal())
         elif kind == "beckmann_refraction":
             b.beckmann_refraction(color, kw["alpha"], kw["ior"], b.view() if kw["normal"] == "view" else b.normal())
-        else:  # diffuse, translucent, velvet: the backend's method of that name takes the parameters as they are
+        else:  # diffuse, translucent, velvet, toons: the backend's method of that name takes the parameters
             getattr(b, kind)(color, **kw)

@@ -481,6 +481,14 @@ class NodeBackend:
         """Sheen BSDF, Ashikhmin distribution (its Roughness is the velvet's σ)."""
         self._closure("ShaderNodeBsdfSheen", {"Color": color, "Roughness": sigma}, distribution="ASHIKHMIN")
 
+    def glossy_toon(self, color, size, smooth):
+        """Toon BSDF, glossy component."""
+        self._closure("ShaderNodeBsdfToon", {"Color": color, "Size": size, "Smooth": smooth}, component="GLOSSY")
+
+    def diffuse_toon(self, color, size, smooth):
+        """Toon BSDF, diffuse component."""
+        self._closure("ShaderNodeBsdfToon", {"Color": color, "Size": size, "Smooth": smooth}, component="DIFFUSE")
+
     def dielectric(self, color, alpha, ior):
         self._closure("ShaderNodeBsdfGlass", {"Color": color, "Roughness": self._roughness(alpha), "IOR": ior},
                       distribution="GGX")

@@ -26,9 +26,11 @@ SCENES = [S.sphere_scene(resolution=32), S.plane_scene(resolution=(32, 16)), S.b
 # small, with many samples: Cycles samples the velvet closure uniformly over the hemisphere, so its narrow grazing
 # lobes are noisy under the sky (sheen's fit: 6.8% at 24 x 12 px and 128 samples, 1.4% with 1024)
 FURNACE = S.furnace_scene(resolution=(12, 6))
-# SpongeCake stacks whose fits add closures (refraction about the view, GGX; velvet), a thin coat whose fit rescales
-# grey ones
-CASES = [("spongecake", "leaf"), ("spongecake", "sheen"), ("thin_coat", "amber_lacquer")]
+# SpongeCake stacks whose fits add closures (refraction about the view, GGX; velvet), thin coats whose fit takes the
+# Toon lobes (glossy and diffuse) or rescales grey closures
+CASES = [("spongecake", "leaf"), ("spongecake", "sheen"), ("thin_coat", "smooth_over_rough"),
+         ("thin_coat", "amber_lacquer")]
+TOON_CASE = ("thin_coat", "smooth_over_rough")
 
 
 @pytest.fixture(autouse=True)
@@ -48,6 +50,8 @@ def test_cycles_renders_the_fitted_prediction(model_id, name, form, tmp_path):
     mat = material.new_material(model_id, p, form, mapping="fitted")
     fit = material.fit_of(mat)
     assert fit is not None and material.fit_record(mat)["used"] == "fitted"
+    if (model_id, name) == TOON_CASE:  # Cycles' Toon BSDF in both forms, as closures_np predicts it
+        assert {kind for kind, _ in fit.extras} == {"glossy_toon", "diffuse_toon"}
     for spec in SCENES + [FURNACE]:
         img = render(mat, spec, 1024 if spec is FURNACE else 32, tmp_path)
         error = relative_error(img, predicted_image(model_id, p, form, spec, fit), spec)
