@@ -205,7 +205,8 @@ def reference_image(model_id: str, p, spec, albedo_samples: int) -> np.ndarray:
             _references.clear()
         ref = reference_of(model_id)
         _references[key] = ref_scenes.reference_image(
-            spec, lambda wi, wo: ref.eval(p, wi, wo), bsdf_albedo=lambda wo: ref.furnace_albedo(p, wo, n=albedo_samples))
+            spec, lambda wi, wo: ref.eval(p, wi, wo),
+            bsdf_albedo=lambda wo: ref.furnace_albedo(p, wo, n=albedo_samples))
     return _references[key]
 
 
@@ -228,7 +229,10 @@ def choose(model_id: str, p, form: str, mapping: str = "auto", driven: fitted.Dr
             made.fit = fit_for(model_id, p, form, made.variant, driven, progress)
         return made
     fits = {v: fit_for(model_id, p, form, v) for v in VARIANTS}
-    distinct = list({f.digest(): v for v, f in reversed(fits.items())}.values())  # alike fits: the first variant
+    first_of = {}  # alike fits are measured once, as the first variant that made them
+    for v, f in fits.items():
+        first_of.setdefault(f.digest(), v)
+    distinct = list(first_of.values())
     errors, means = _measured(model_id, p, form, {v.label: fits[v] for v in distinct})
     error = {name: counted(e, means) for name, e in errors.items()}
     best = min(distinct, key=lambda v: (error[v.label], VARIANTS.index(v)))

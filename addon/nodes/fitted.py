@@ -65,9 +65,10 @@ def table_coordinate(b):
 
 def extra_dictionary(toons: bool = False) -> list[tuple[str, dict]]:
     """(kind, parameters) of the closures the fit may add, each with a white colour: those whose Cycles rendering
-    ``closures_np`` predicts under suns and in the furnace (tests/blender), with ``TOONS`` if ``toons``. Refraction around the normal is not among
-    them: under a uniform sky Cycles renders it darker at grazing views than its evaluation integrates to (seen in
-    a one-off render, α = 1, IOR 1.5; not yet a test), so its prediction would be off there."""
+    ``closures_np`` predicts under suns and in the furnace (tests/blender), with ``TOONS`` if ``toons``. Refraction
+    around the normal is not among them: under a uniform sky Cycles renders it darker at grazing views than its
+    evaluation integrates to (seen in a one-off render, α = 1, IOR 1.5; not yet a test), so its prediction would be
+    off there."""
     up = (0.0, 0.0, 1.0)
     out = [("diffuse", {}), ("translucent", {})]
     out += [("ggx", {"alpha": a, "normal": up}) for a in (0.1, 0.15, 0.2, 0.3, 0.45, 0.6, 0.8, 1.0)]
@@ -437,10 +438,10 @@ def fit(backend_of, ref_eval, ref_albedo, form: str, damping: float = 1.0, toons
     """Fit the mapping whose view-only closures ``backend_of(wo)`` records (a ``NumpyBackend`` after ``shade``)
     against the reference ``ref_eval(wi, wo)`` (N, 3) and directional albedo ``ref_albedo(wo)`` (N, 3): up to
     ``MAX_EXTRAS`` extra closures chosen greedily (``_chosen``; from ``extra_dictionary(toons)``), each kept only if
-    it lowers the error by ``EXTRA_GAIN``, within the analytic mapping's closure count. The residual at each direction is divided by (the
-    reference's mean level + its value)^``damping``: 1 weighs relative errors (a peak counts no more than the dim
-    rest), 0 absolute ones. Given ``groups`` (the atoms), ``extras`` (the extra closures, all used) and ``atoms``
-    (which atoms render; all by default), the fit keeps that structure (``fit_driven``)."""
+    it lowers the error by ``EXTRA_GAIN``, within the analytic mapping's closure count. The residual at each
+    direction is divided by (the reference's mean level + its value)^``damping``: 1 weighs relative errors (a peak
+    counts no more than the dim rest), 0 absolute ones. Given ``groups`` (the atoms), ``extras`` (the extra closures,
+    all used) and ``atoms`` (which atoms render; all by default), the fit keeps that structure (``fit_driven``)."""
     analytic = backend_of(np.array([[0.0, 0.0, 1.0]]))
     closures = _fitted_closures(analytic.closures)
     groups = atom_groups(backend_of) if groups is None else tuple(groups)

@@ -32,8 +32,9 @@ in backend math), and each lobe becomes one closure whose weight depends on the 
   crossing of the top and the absorption on the way in, ``reference.thin_coat.entry``) replaced by its
   cosine-weighted hemispherical mean ē (``mean_entry``, 3 nodes): a closure weight cannot depend on the light; the
   energy under uniform light is kept (the view's entry(θo), exact at the mirror configuration only, was tried and
-  measured worse on glazed_ceramic). [approx: diffuse-entry-mean] The hemispherical means inside the coat (r̄_i, and τ̄ = 2 E3(σa d) per
-  channel) come from fits (``diffuse_means``; ``diffuse_means_error``: 4.5e-5 and 1.8e-4). [approx: diffuse-means-fit]
+  measured worse on glazed_ceramic). [approx: diffuse-entry-mean] The hemispherical means inside the coat (r̄_i,
+  and τ̄ = 2 E3(σa d) per channel) come from fits (``diffuse_means``; ``diffuse_means_error``: 4.5e-5 and 1.8e-4).
+  [approx: diffuse-means-fit]
 * Slab transmission order j: the vMF lobe W_j M(i; −o, κ_j) of exit directions, as Cycles' Beckmann refraction
   without Fresnel around the closure normal o (the view itself) into a medium of relative IOR ``SLAB_IOR``: at
   normal incidence a microfacet tilted by θm deviates the refracted ray by (1 − 1/η) θm, so the Beckmann lobe of
@@ -507,8 +508,8 @@ def endf_energy(mu, kappa, n: tuple = (256, 64)) -> np.ndarray:
 
 def energy_ratio_error(mu=None, kappa=None) -> float:
     """Largest relative error of ``energy_ratio`` against the ratio of ``endf_energy`` to the albedo of Cycles'
-    Beckmann closure about ``endf_axis`` (``closures_np.beckmann_reflection_albedo``) over a grid of views and concentrations (by default cos θo in
-    [0.005, 1] and κ̂ in [0.01, 1e4], 8 x 9 points)."""
+    Beckmann closure about ``endf_axis`` (``closures_np.beckmann_reflection_albedo``) over a grid of views and
+    concentrations (by default cos θo in [0.005, 1] and κ̂ in [0.01, 1e4], 8 x 9 points)."""
     from . import closures_np
     from .expr import NumpyBackend
 
