@@ -23,9 +23,14 @@ by the balance heuristic (multiple importance sampling), at ``AZIMUTHS`` view az
 """
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import functools
+import glob
 import hashlib
 import json
 import math
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -225,6 +230,46 @@ def nnls_gram(gram: np.ndarray, rhs: np.ndarray, tol: float = 1e-12) -> np.ndarr
             passive &= x > tol
             x[~passive] = 0.0
     return x
+
+
+# ------------------------------------------------------------------------------ one BLAS thread
+
+OPENBLAS_SUFFIXES = ("64_", "_64_", "")  # numpy's own OpenBLAS builds name their symbols with one of these
+
+
+@functools.lru_cache(maxsize=1)
+def openblas_threads():
+    """(get, set) of the thread count of the OpenBLAS bundled with numpy (``numpy.libs``, ``numpy/.dylibs``), or
+    None where numpy uses another BLAS."""
+    root = os.path.dirname(np.__file__)
+    for path in sorted(glob.glob(os.path.join(root + ".libs", "*openblas*")) +
+                       glob.glob(os.path.join(root, ".dylibs", "*openblas*"))):
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for suffix in OPENBLAS_SUFFIXES:
+            get = getattr(lib, f"openblas_get_num_threads{suffix}", None)
+            put = getattr(lib, f"openblas_set_num_threads{suffix}", None)
+            if get is not None and put is not None:
+                return get, put
+    return None
+
+
+@contextlib.contextmanager
+def one_blas_thread():
+    """OpenBLAS on one thread inside (restored after): the fit solves thousands of systems of a dozen unknowns, and
+    a threaded solve waits for a busy core (12 µs idle, 144 µs beside a busy core, 8 µs on one thread; the Makefile
+    gives make's runs one thread the same way). Nothing changes where numpy uses another BLAS."""
+    threads = openblas_threads()
+    before = threads[0]() if threads else None
+    if threads:
+        threads[1](1)
+    try:
+        yield
+    finally:
+        if threads:
+            threads[1](before)
 
 
 # ------------------------------------------------------------------------------ the fit
@@ -433,6 +478,7 @@ def _grey(kind: str, kw: dict, form: str) -> bool:
     return form == "nodes" and (kind == "conductor" or (kind == "beckmann" and kw.get("eta") is not None))
 
 
+@one_blas_thread()
 def fit(backend_of, ref_eval, ref_albedo, form: str, damping: float = 1.0, toons: bool = False, groups=None,
         extras=None, atoms=None) -> Fit:
     """Fit the mapping whose view-only closures ``backend_of(wo)`` records (a ``NumpyBackend`` after ``shade``)

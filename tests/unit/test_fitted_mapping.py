@@ -341,3 +341,23 @@ def test_the_choice_keeps_the_fit_without_toon_lobes_where_they_mislead():
     errors, means = choice._measured(spongecake.ID, p, "osl", {v.label: choice.fit_for(spongecake.ID, p, "osl", v)
                                                                for v in with_toons})
     assert all(choice.counted(errors[v.label], means) > chosen.error["fitted"] for v in with_toons)
+
+
+def test_the_fit_solves_on_one_blas_thread_and_gives_the_count_back(monkeypatch):
+    """The fit's thousands of small solves run on one OpenBLAS thread (a threaded solve waits for a busy core, as in
+    Blender beside a render), and the caller's thread count is restored after the fit."""
+    threads = fitted.openblas_threads()
+    if threads is None:
+        pytest.skip("numpy uses another BLAS than its own OpenBLAS")
+    get, put = threads
+    seen = []
+    solve = fitted.nnls_gram
+    monkeypatch.setattr(fitted, "nnls_gram", lambda *a, **k: seen.append(get()) or solve(*a, **k))
+    before = get()
+    put(2)
+    try:
+        choice.fit_for(thin_coat.ID, _preset(thin_coat, "glazed_ceramic"), "osl")
+        assert seen and set(seen) == {1}
+        assert get() == 2
+    finally:
+        put(before)
