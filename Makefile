@@ -6,9 +6,8 @@ VENV42 := .venv-blender-4.2
 PY42 := $(VENV42)/bin/python
 EXT_TOOL = $(wildcard $(VENV)/lib/python3.11/site-packages/bpy/*/scripts/addons_core/bl_pkg/cli/blender_ext.py)
 OUT ?= out
-# One BLAS thread per process: make runs two on the two cores, and numpy's OpenBLAS threads make each small solve
-# wait for the busy core (the fitter's 12 x 12 normal equations: 12 us idle, 144 us beside a busy core, 8 us with one
-# thread; measured once on this 2-core machine with numpy.linalg.solve).
+# One BLAS thread per process: make runs two on the two cores, and numpy's threaded OpenBLAS makes each small solve
+# wait for the busy core (the fitter's figures: addon/nodes/fitted.py, one_blas_thread).
 export OPENBLAS_NUM_THREADS := 1
 # Multiple-scattering training data: a cache outside the repository (resumable; see docs/training.md).
 DATA ?= $(HOME)/.cache/lamina/spongecake-ms

@@ -337,10 +337,9 @@ def test_the_choice_keeps_the_fit_without_toon_lobes_where_they_mislead():
     p = _preset(spongecake, "leaf")
     chosen = choice.choose(spongecake.ID, p, "osl", "fitted")
     assert not chosen.variant.toons
-    with_toons = [v for v in choice.VARIANTS if v.toons]
-    errors, means = choice._measured(spongecake.ID, p, "osl", {v.label: choice.fit_for(spongecake.ID, p, "osl", v)
-                                                               for v in with_toons})
-    assert all(choice.counted(errors[v.label], means) > chosen.error["fitted"] for v in with_toons)
+    shaders = {v.label: ("osl", choice.fit_for(spongecake.ID, p, "osl", v)) for v in choice.VARIANTS if v.toons}
+    errors, means = choice.comparison_errors(spongecake.ID, p, shaders)
+    assert all(choice.counted(errors[label], means) > chosen.error["fitted"] for label in shaders)
 
 
 def test_the_fit_solves_on_one_blas_thread_and_gives_the_count_back(monkeypatch):
