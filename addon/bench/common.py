@@ -77,7 +77,7 @@ def mapping_section(model, resolution: int) -> list[str]:
              "|---|---|---|---|---|---|---|---|"]
     summary = ["", f"Fit s: the {len(choice.VARIANTS)} fits (weightings "
                f"{', '.join(sorted({f'{v.damping:g}' for v in choice.VARIANTS}))}, without and with the Toon lobes, "
-               "`nodes.choice`) from scratch; measure s: the analytic mapping and the distinct fits on the comparison "
+               "`nodes.choice.fits_for`: one quadrature for all) from scratch; measure s: the analytic mapping and the distinct fits on the comparison "
                "scenes.", "",
                "| preset | form | Auto renders | closures analytic → fitted | fit s | measure s |",
                "|---|---|---|---|---|---|"]
@@ -86,7 +86,7 @@ def mapping_section(model, resolution: int) -> list[str]:
             p = model.params_from_dict(presets.load(model.ID, name))
             chosen = {}
             for form in ("osl", "nodes"):
-                fit_seconds = timed(lambda: [choice.fit_for(model.ID, p, form, v) for v in choice.VARIANTS])
+                fit_seconds = timed(lambda: choice.fits_for(model.ID, p, form))
                 start = time.perf_counter()
                 chosen[form] = choice.choose(model.ID, p, form, "auto")
                 fit = choice.choose(model.ID, p, form, "fitted").fit

@@ -1,7 +1,8 @@
 """Which mapping a material renders with: analytic, fitted, or Auto (bpy-free).
 
 ``fit_for`` fits the material against the model's float64 reference (``fitted.fit``, one fit per ``VARIANTS``:
-residual weighting and dictionary), cached by content (parameters, form, fitter version) in memory and on disk.
+residual weighting and dictionary), cached by content (parameters, form, fitter version) in memory and on disk;
+``fits_for`` makes every variant's fit at once, on one quadrature (``fitted.fit_variants``).
 ``choose`` measures the analytic mapping and each distinct fit on the comparison scenes at ``CHOICE_RESOLUTION`` (the
 scenes and resolution ``make bench`` reports; a smaller furnace): the Fitted mapping is the closest fit, and Auto
 keeps the analytic one unless the fitted one is lower by ``AUTO_MARGIN``.
@@ -95,32 +96,58 @@ def fit_for(model_id: str, p, form: str, variant: Variant = VARIANTS[0], driven:
     """The fit of ``p`` in ``form`` of ``variant`` (``fitted.fit``; ``fitted.fit_driven`` over a ``driven`` input,
     reporting ``progress(fraction)``), cached in memory and in ``cache_folder`` (an unreadable cache file is refitted
     and replaced)."""
-    key = f"{fit_key(model_id, p, form, driven)}-{variant.damping:g}{'-toons' * variant.toons}"
-    if key in _fits:
-        return _fits[key]
-    path = cache_folder() / f"{key}.npz"
-    try:
-        with np.load(path) as data:
-            _fits[key] = fitted.Fit.from_arrays(data)
-            return _fits[key]
-    except (OSError, ValueError, KeyError):
-        pass
+    key = _variant_key(model_id, p, form, variant, driven)
+    found = _cached(key)
+    if found is not None:
+        return found
+    if driven is None:
+        result = fitted.fit(*_problem(model_id, p, form), form, variant.damping, variant.toons)
+    else:
+        problems = [_problem(model_id, at(model_id, p, driven, j), form) for j in range(len(driven.values))]
+        result = fitted.fit_driven(problems, driven, form, variant.damping, variant.toons, progress)
+    return _stored(key, result)
+
+
+def fits_for(model_id: str, p, form: str) -> dict:
+    """{variant: fit} of ``p`` in ``form`` for every one of ``VARIANTS`` (``fit_for``'s caches), those not cached
+    fitted together on one quadrature (``fitted.fit_variants``)."""
+    keys = {v: _variant_key(model_id, p, form, v) for v in VARIANTS}
+    found = {v: _cached(key) for v, key in keys.items()}
+    missing = [v for v, f in found.items() if f is None]
+    if missing:
+        made = fitted.fit_variants(*_problem(model_id, p, form), form, [(v.damping, v.toons) for v in missing])
+        found.update({v: _stored(keys[v], f) for v, f in zip(missing, made)})
+    return found
+
+
+def _variant_key(model_id: str, p, form: str, variant: Variant, driven: fitted.Driven | None = None) -> str:
+    return f"{fit_key(model_id, p, form, driven)}-{variant.damping:g}{'-toons' * variant.toons}"
+
+
+def _problem(model_id: str, q, form: str):
+    """(backend_of, ref_eval, ref_albedo) of ``q`` in ``form``: what ``fitted.fit`` fits."""
     from . import _backend
 
     ref = reference_of(model_id)
+    return (lambda wo: _backend(model_id, q, form, wo), lambda wi, wo: ref.eval(q, wi, wo),
+            lambda wo: ref.furnace_albedo(q, wo, n=REFERENCE_ALBEDO_SAMPLES))
 
-    def problem(q):
-        return (lambda wo: _backend(model_id, q, form, wo), lambda wi, wo: ref.eval(q, wi, wo),
-                lambda wo: ref.furnace_albedo(q, wo, n=REFERENCE_ALBEDO_SAMPLES))
 
-    if driven is None:
-        result = fitted.fit(*problem(p), form, variant.damping, variant.toons)
-    else:
-        problems = [problem(at(model_id, p, driven, j)) for j in range(len(driven.values))]
-        result = fitted.fit_driven(problems, driven, form, variant.damping, variant.toons, progress)
-    _cache_write(path, lambda f: np.savez(f, **result.to_arrays()))
-    _fits[key] = result
-    return result
+def _cached(key: str) -> fitted.Fit | None:
+    """The fit stored under ``key`` in memory or in ``cache_folder``; None if absent or unreadable."""
+    if key not in _fits:
+        try:
+            with np.load(cache_folder() / f"{key}.npz") as data:
+                _fits[key] = fitted.Fit.from_arrays(data)
+        except (OSError, ValueError, KeyError):
+            return None
+    return _fits[key]
+
+
+def _stored(key: str, fit: fitted.Fit) -> fitted.Fit:
+    _cache_write(cache_folder() / f"{key}.npz", lambda f: np.savez(f, **fit.to_arrays()))
+    _fits[key] = fit
+    return fit
 
 
 def _cache_write(path: Path, write) -> None:
@@ -228,7 +255,7 @@ def choose(model_id: str, p, form: str, mapping: str = "auto", driven: fitted.Dr
         if made.used == "fitted":
             made.fit = fit_for(model_id, p, form, made.variant, driven, progress)
         return made
-    fits = {v: fit_for(model_id, p, form, v) for v in VARIANTS}
+    fits = fits_for(model_id, p, form)
     first_of = {}  # alike fits are measured once, as the first variant that made them
     for v, f in fits.items():
         first_of.setdefault(f.digest(), v)

@@ -37,6 +37,20 @@ def test_nnls_matches_a_brute_force_solution():
     assert np.linalg.norm(a @ x - b) <= best[0] + 1e-9
 
 
+def test_nnls_takes_the_unconstrained_minimum_only_where_it_is_positive():
+    """The one-solve answer where every weight of the unconstrained minimum is positive, the active set otherwise:
+    both the minimum over x ≥ 0 (the brute force over the supports)."""
+    rng = np.random.default_rng(5)
+    for shift in (3.0, 0.0):  # a target inside the positive cone, then one outside
+        a = rng.random(size=(30, 4))
+        b = a @ (rng.random(4) + shift - 1.5) + 0.01 * rng.normal(size=30)
+        x = fitted.nnls_gram(a.T @ a, a.T @ b)
+        assert (x >= 0).all() and ((x > 0).all() if shift else (x == 0).any())
+        best = min(np.linalg.norm(a[:, list(s)] @ np.clip(np.linalg.lstsq(a[:, list(s)], b, rcond=None)[0], 0, None)
+                                  - b) for s in _subsets(4))
+        assert np.linalg.norm(a @ x - b) <= best + 1e-9
+
+
 def _subsets(n):
     return [tuple(i for i in range(n) if m >> i & 1) for m in range(1, 1 << n)]
 
@@ -118,6 +132,38 @@ def test_fits_are_deterministic_and_cached(monkeypatch):
     np.testing.assert_array_equal(refitted.scales, first.scales)
     with np.load(files[0]) as data:
         assert fitted.Fit.from_arrays(data).digest() == first.digest()
+
+
+def test_the_variants_fitted_together_are_the_fits_made_one_by_one(monkeypatch):
+    """``fitted.fit_variants`` evaluates the quadrature once for every weighting and dictionary: each of its fits is
+    the one ``fitted.fit`` makes alone (a coarse grid of views keeps this quick)."""
+    monkeypatch.setattr(fitted, "KNOTS", 5)
+    monkeypatch.setattr(fitted, "AZIMUTHS", 2)
+    p = _preset(thin_coat, "smooth_over_rough")
+    problem = choice._problem(thin_coat.ID, p, "osl")
+    variants = [(v.damping, v.toons) for v in choice.VARIANTS]
+    together = fitted.fit_variants(*problem, "osl", variants)
+    alone = [fitted.fit(*problem, "osl", damping, toons) for damping, toons in variants]
+    assert len({f.digest() for f in alone}) > 1  # the variants differ here
+    for a, b in zip(together, alone):
+        assert a.extras == b.extras and a.groups == b.groups
+        np.testing.assert_allclose(a.scales, b.scales, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(a.extra_weights, b.extra_weights, rtol=1e-9, atol=1e-12)
+        assert a.error_fitted == pytest.approx(b.error_fitted, rel=1e-9)
+
+
+def test_every_variant_is_fitted_at_once_and_cached_each_on_its_own(monkeypatch):
+    p = _preset(thin_coat, "rough_over_smooth")
+    calls = []
+    together = fitted.fit_variants
+    monkeypatch.setattr(fitted, "fit_variants", lambda *a, **k: calls.append(a[-1]) or together(*a, **k))
+    fits = choice.fits_for(thin_coat.ID, p, "nodes")
+    assert calls == [[(v.damping, v.toons) for v in choice.VARIANTS]]  # one quadrature for the four
+    assert len(list(choice.cache_folder().glob("*.npz"))) == len(choice.VARIANTS)
+    monkeypatch.setattr(choice, "_fits", {})
+    monkeypatch.setattr(fitted, "fit", lambda *a, **k: pytest.fail("refitted although cached"))
+    for v, f in fits.items():
+        assert choice.fit_for(thin_coat.ID, p, "nodes", v).digest() == f.digest()
 
 
 def test_a_changed_value_is_a_different_fit():
