@@ -224,16 +224,6 @@ class NumpyBackend(NumpyMath):
                 out += color * closures_np.ggx_sampling_leak(self.wo, **kw)
         return out
 
-    def own_albedo(self, quadratures=closures_np.ALBEDO) -> tuple[np.ndarray, bool]:
-        """The directional albedo (N, 3) of the closures that have a quadrature of their own in ``quadratures``
-        (``closures_np.ALBEDO``: Lambert exactly, Beckmann lobes of any sharpness in slope space), and whether other
-        closures remain (for ``evaluate_rows`` on a direction grid)."""
-        out = np.zeros((self.n, 3))
-        for kind, color, kw in self.closures:
-            if kind in quadratures:
-                out += np.broadcast_to(color, (self.n, 3)) * quadratures[kind](self.wo, **kw)
-        return out, any(kind not in quadratures for kind, _, _ in self.closures)
-
     def evaluate(self, wi: np.ndarray) -> np.ndarray:
         """The BSDF value (no cosine) that the recorded closures give for light from ``wi``."""
         wi = np.asarray(wi, dtype=np.float64)
@@ -242,41 +232,61 @@ class NumpyBackend(NumpyMath):
             f += color * closures_np.EVAL[kind](wi, self.wo, **kw)
         return f
 
-    def evaluate_rows(self, wi: np.ndarray, rows: np.ndarray, quadratures=closures_np.ALBEDO) -> np.ndarray:
-        """``evaluate(wi)`` of the closures without an albedo quadrature of their own in ``quadratures`` (see
-        ``own_albedo``) for the views ``wo[rows]`` (one row index per wi), reusing the closures
-        recorded at ``wo`` instead of shading the views again (``closure_furnace``). Needs every per-view value
-        recorded with N rows, which ``closure_furnace`` ensures by never shading exactly 3 views (a constant
-        direction or colour has 3 entries too)."""
-        f = np.zeros((len(wi), 3))
-        for kind, color, kw in self.closures:
-            if kind not in quadratures:
-                taken = {k: self._per_row(v, rows) for k, v in kw.items()}
-                f += self._per_row(color, rows) * closures_np.EVAL[kind](wi, self.wo[rows], **taken)
-        return f
+    def unit_albedo(self, kind: str, kw: dict, quadratures=closures_np.ALBEDO, quadrature=(64, 128)) -> np.ndarray:
+        """The directional albedo (N, 3) at the recorded views of one closure ``kind`` with parameters ``kw`` (as
+        recorded) and a white colour: its own quadrature in ``quadratures`` (``closures_np.ALBEDO``: Lambert exactly,
+        Beckmann lobes of any sharpness in slope space), else ``reference.scenes.directional_albedo``'s direction grid
+        of ``quadrature`` nodes, each view's parameters taken from its row. Kept for the last few hundred closures
+        (``_unit_albedos``): the mappings and fits of one material share most of theirs."""
+        from ..reference.scenes import directional_albedo
+
+        key = _albedo_key(kind, kw, self.wo, kind in quadratures and quadratures[kind], quadrature)
+        if key not in _unit_albedos:
+            if kind in quadratures:
+                value = np.broadcast_to(quadratures[kind](self.wo, **kw), (self.n, 3))
+            else:
+                def evaluate(wi, rows):
+                    taken = {k: self._per_row(v, rows) for k, v in kw.items()}
+                    return closures_np.EVAL[kind](wi, self.wo[rows], **taken)
+
+                value = directional_albedo(evaluate, self.wo, quadrature, by_row=True)
+            if len(_unit_albedos) >= UNIT_ALBEDOS_KEPT:
+                _unit_albedos.clear()
+            _unit_albedos[key] = value
+        return _unit_albedos[key]
 
     def _per_row(self, v, rows):
         a = np.asarray(v) if v is not None else None
         return a[rows] if a is not None and a.ndim and a.shape[0] == self.n else v
 
 
+UNIT_ALBEDOS_KEPT = 512
+_unit_albedos: dict = {}
+
+
+def _albedo_key(kind: str, kw: dict, wo: np.ndarray, own, quadrature) -> tuple:
+    """What a closure's unit albedo depends on: its kind and parameters, the views, and how it is integrated."""
+    parts = [kind.encode(), wo.tobytes(), repr(own).encode(), repr(quadrature).encode()]
+    for name in sorted(kw):
+        value = kw[name]
+        parts.append(name.encode() + (b"none" if value is None else np.asarray(value, dtype=float).tobytes()))
+    return tuple(parts)
+
+
 def closure_furnace(backend_at, wo: np.ndarray, quadrature=(64, 128), quadratures=closures_np.ALBEDO) -> np.ndarray:
     """What a white furnace shows towards ``wo`` (N, 3) through the closures that ``backend_at(wo)`` records (a
-    shaded ``NumpyBackend``): directional albedo plus transparency. Closures with an albedo quadrature of their own
-    in ``quadratures`` (``closures_np.ALBEDO``: Lambert, sharp Beckmann lobes; ``closures_np.SHARP_ALBEDO`` adds
-    GGX reflection) use it; the others are integrated on ``reference.scenes.directional_albedo``'s direction grid
-    (``quadrature`` nodes)."""
-    from ..reference.scenes import directional_albedo
-
+    shaded ``NumpyBackend``): each closure's colour times its ``NumpyBackend.unit_albedo`` (with ``quadratures``:
+    ``closures_np.ALBEDO``, or ``closures_np.SHARP_ALBEDO`` which adds GGX reflection; the others on a ``quadrature``
+    direction grid), plus transparency."""
     wo = np.asarray(wo, dtype=np.float64).reshape(-1, 3)
     n = len(wo)
-    padded = np.concatenate([wo, wo[:1]]) if n == 3 else wo  # see ``NumpyBackend.evaluate_rows``
+    padded = np.concatenate([wo, wo[:1]]) if n == 3 else wo  # see ``NumpyBackend._per_row``
     b = backend_at(padded)
-    own, rest = b.own_albedo(quadratures)
-    if rest:
-        own = own + directional_albedo(lambda wi, rows: b.evaluate_rows(wi, rows, quadratures), padded, quadrature,
-                                       by_row=True)
-    return (own + b.transparency())[:n]
+    out = b.transparency()
+    for kind, color, kw in b.closures:
+        if kind != "transparent":  # no BSDF value: counted in ``transparency``
+            out = out + np.broadcast_to(color, (b.n, 3)) * b.unit_albedo(kind, kw, quadratures, quadrature)
+    return out[:n]
 
 
 # ----------------------------------------------------------------------------------------------- OSL

@@ -265,7 +265,7 @@ def test_with_view_independent_weights_a_white_stack_still_returns_what_it_recei
 
 @pytest.mark.parametrize("views", [3, 7])
 def test_the_furnace_reuses_each_views_closures_exactly(views):
-    """``closure_furnace`` integrates the closures recorded once per view (``evaluate_rows``): the same numbers as
+    """``closure_furnace`` integrates the closures recorded once per view (``NumpyBackend.unit_albedo``): the same numbers as
     shading every direction of the grid again, also for 3 views (a constant direction has 3 entries too); a fiber
     layer and a tilted flake layer give closures with per-view normals and tangents."""
     from addon.reference.scenes import directional_albedo
@@ -282,6 +282,25 @@ def test_the_furnace_reuses_each_views_closures_exactly(views):
     regridded = directional_albedo(lambda wi, w: backend_at(w).evaluate(wi), wo, (16, 32))
     reused = expr.closure_furnace(backend_at, wo, (16, 32), quadratures={})
     np.testing.assert_allclose(reused, regridded, rtol=1e-12, atol=1e-15)
+
+
+def test_the_furnace_integrates_a_closure_seen_before_only_once(monkeypatch):
+    """Each closure's albedo is kept (``NumpyBackend.unit_albedo``): a second shader with the same closures at other
+    weights (as a fitted mapping rescales the analytic one's) is integrated without the direction grid, and gives its
+    own weights times the same albedos."""
+    from addon.reference import scenes
+
+    p = model.params_from_dict(presets.load(model.ID, "fabric"))
+    wo = _dirs(7, 3)
+    first = expr.closure_furnace(lambda w: nodes._backend(model.ID, p, "osl", w), wo)
+
+    def halved(w):
+        b = nodes._backend(model.ID, p, "osl", w)
+        b.closures = [(kind, 0.5 * np.asarray(color), kw) for kind, color, kw in b.closures]
+        return b
+
+    monkeypatch.setattr(scenes, "directional_albedo", lambda *a, **k: pytest.fail("integrated again"))
+    np.testing.assert_allclose(expr.closure_furnace(halved, wo), 0.5 * first, rtol=1e-12)
 
 
 @pytest.mark.parametrize("name, merged", [("fabric", 1), ("window_shade", 2)])
