@@ -15,9 +15,9 @@ Conventions (local frame, z = macro normal; ``wi`` points to the light, ``wo`` t
   (transmitted throughput integrates to 1 - F; f(i, o) / eta_o^2 = f(o, i) / eta_i^2).
 * Delta transmission is a Dirac along -wi with weight prod_k tau_k(wi), only when the flag is on and there is
   no substrate (every substrate blocks or refracts it); it is not part of ``eval`` or ``pdf``.
-* With ``multiple_scattering``, ``eval`` adds the network's lobes (Sec. 5, and a forward lobe of ours) and
-  ``sample``/``pdf`` still sample single scattering only, as the paper does (Sec. 4.5); the sample weight uses the
-  full f.
+* With ``multiple_scattering``, ``eval`` adds the network's lobes (Sec. 5, and a forward lobe of ours), and
+  ``sample``/``pdf`` sample them too (not in the paper, whose Sec. 4.5 samples single scattering only): the lobes of
+  the prediction of wi's side by their own samplers, W2r and W2t cosine-weighted on wi's side and the other.
 * Energy (``energy_tables``; not in the paper): the network's lobes are scaled per view by
   s(ωo) = min((left(ωo) − m) / E(ωo), limit), tabulated on ``ENERGY_KNOTS`` view cosines and, where a layer is
   oriented off the normal, ``ENERGY_AZIMUTHS`` view azimuths, interpolated bilinearly in √|μo| and the azimuth
@@ -33,7 +33,8 @@ Conventions (local frame, z = macro normal; ``wi`` points to the light, ``wo`` t
   is the same at both directions. [named: ms-energy]
 * Sampling picks a lobe with P(first collision in layer k) = (1 - tau_k(wi)) prod_{j between} tau_j(wi), the
   substrate (or the Dirac) with prod_k tau_k(wi), renormalised (uniform over the continuous lobes when all
-  vanish, where f = 0 anyway). ``pdf`` is the exact density of the continuous samples; a Dirac sample has
+  vanish, where f = 0 anyway); multiple scattering's lobes take their rough share of the light returned
+  (``_lobe_probabilities``). ``pdf`` is the exact density of the continuous samples; a Dirac sample has
   wo = -wi, pdf = P(delta) and weight = delta_transmittance / P(delta).
 """
 from __future__ import annotations
@@ -334,8 +335,9 @@ def delta_transmittance(params: Params, wi):
     return np.exp(-_optical_depths(params, wi).sum(axis=0))[:, None] * np.ones(3)
 
 
-def _lobe_probabilities(params: Params, wi):
-    """(N, lobes) selection probabilities: layers, then the substrate or the Dirac when present (Sec. 4.5)."""
+def _single_weights(params: Params, wi):
+    """(N, lobes) unnormalised selection weights of single scattering: P(first collision in layer k) per layer, then
+    the substrate or the Dirac when present (Sec. 4.5)."""
     depths = _optical_depths(params, wi)
     up = _above(wi)
     through = np.exp(-depths.sum(axis=0))
@@ -344,17 +346,100 @@ def _lobe_probabilities(params: Params, wi):
         columns = [c * up for c in columns] + [np.where(up, through, 1.0)]
     elif params.delta_transmission:
         columns.append(through)
-    p = np.stack(columns, axis=1)
-    n_continuous = len(params.layers) + (params.substrate is not None)
+    return np.stack(columns, axis=1)
+
+
+def _normalised(p, n_continuous):
+    """Rows of p divided by their sums; uniform over the first ``n_continuous`` lobes where a row is all 0."""
     fallback = np.zeros(p.shape[1])
     fallback[:n_continuous] = 1.0 / n_continuous
     total = p.sum(axis=1, keepdims=True)
     return np.where(total > 0, p / np.where(total > 0, total, 1.0), fallback)
 
 
+def _intercepted(params: Params, wi):
+    """(N,) the light a stack scatters once from wi, roughly: P(first collision in layer k) times the layer's mean
+    albedo, summed (the substrate and the Dirac at full weight)."""
+    albedo = [np.mean(layer.albedo) for layer in params.layers] + [1.0] * (params.substrate is not None)
+    weights = _single_weights(params, wi)
+    return weights[:, : len(albedo)] @ np.asarray(albedo) + weights[:, len(albedo):].sum(axis=1)
+
+
+MS_LOBES = 4  # the network's extra lobe, its forward lobe, W2r's Lambert on wi's side, W2t's on the other
+
+
+def _multiple_weights(params: Params, wi):
+    """(N, ``MS_LOBES``) unnormalised selection weights of multiple scattering's lobes, by their rough albedos
+    (``_intercepted``, W2r, W2t) times the view's mean energy scale; the prediction of wi's side. wi is the view of
+    ``eval_multiple`` (its wo): the sampler starts from the viewer, as ``directional_albedo`` uses it."""
+    from ..bake.spongecake import predict
+
+    pred = predict(params)
+    up = _above(wi)
+    above, below = energy_tables(params)
+    scale = np.where(up, energy_at(above, wi).mean(axis=1), energy_at(below, wi).mean(axis=1))
+    transmits = params.substrate is None
+    columns = [np.where(up, _intercepted(pred.lobe, wi), _intercepted(pred.lobe_below, wi)),
+               np.where(up, _intercepted(pred.forward, wi), _intercepted(pred.forward_below, wi)),
+               np.where(up, np.mean(pred.reflection), np.mean(pred.reflection_below)),
+               np.where(up, np.mean(pred.transmission), np.mean(pred.transmission_below)) * transmits]
+    return np.stack(columns, axis=1) * scale[:, None]
+
+
+def _lobe_probabilities(params: Params, wi):
+    """(N, lobes) selection probabilities: the layers, then with multiple scattering its ``MS_LOBES`` lobes, then the
+    substrate or the Dirac when present (last). Single scattering keeps its own proportions (Sec. 4.5); multiple
+    scattering takes its rough share of the light returned, W_ms / (W_ms + ``_intercepted``)."""
+    single = _single_weights(params, wi)
+    n_layers = len(params.layers)
+    n_continuous = n_layers + (params.substrate is not None)
+    single = _normalised(single, n_continuous)
+    if not params.multiple_scattering:
+        return single
+    multiple = _multiple_weights(params, wi)
+    total = multiple.sum(axis=1, keepdims=True)
+    share = total / np.maximum(total + _intercepted(params, wi)[:, None], 1e-300)
+    multiple = share * np.divide(multiple, total, out=np.zeros_like(multiple), where=total > 0)
+    single = (1.0 - share) * single
+    return np.concatenate([single[:, :n_layers], multiple, single[:, n_layers:]], axis=1)
+
+
+def _multiple_pdfs(params: Params, wi, wo):
+    """(N, ``MS_LOBES``) densities of multiple scattering's lobes' samplers (``_sample_multiple``)."""
+    from ..bake.spongecake import predict
+
+    pred = predict(params)
+    up = _above(wi)
+    side = np.where(up, 1.0, -1.0)
+    return np.stack([np.where(up, pdf(pred.lobe, wi, wo), pdf(pred.lobe_below, wi, wo)),
+                     np.where(up, pdf(pred.forward, wi, wo), pdf(pred.forward_below, wi, wo)),
+                     np.maximum(side * wo[:, 2], 0.0) / np.pi,
+                     np.maximum(-side * wo[:, 2], 0.0) / np.pi], axis=1)
+
+
+def _sample_multiple(params: Params, wi, lobe, u):
+    """Directions (N, 3) from multiple scattering's lobe ``lobe`` (0 .. ``MS_LOBES`` - 1) of each row: the network's
+    lobes by their own samplers (they have no Dirac), the Lambert lobes cosine-weighted."""
+    from ..bake.spongecake import predict
+
+    pred = predict(params)
+    up = _above(wi)
+    wo = np.zeros_like(wi)
+    for k, (lobe_above, lobe_below) in enumerate(((pred.lobe, pred.lobe_below), (pred.forward, pred.forward_below))):
+        for side, stack in ((up, lobe_above), (~up, lobe_below)):
+            m = (lobe == k) & side
+            wo[m] = sample(stack, wi[m], u[m]).wo
+    side = np.where(up, 1.0, -1.0)[:, None]
+    cosine = spherical(np.sqrt(1.0 - u[:, 1]), 2.0 * np.pi * u[:, 2])
+    wo = np.where((lobe == 2)[:, None], side * cosine, wo)
+    return np.where((lobe == 3)[:, None], -side * cosine, wo)
+
+
 def _lobe_pdfs(params: Params, wi, wo):
-    """(N, continuous lobes) densities of each continuous lobe's sampler."""
+    """(N, continuous lobes) densities of each continuous lobe's sampler, in ``_lobe_probabilities``' order."""
     columns = [_phase_pdf(layer, wi, wo) for layer in params.layers]
+    if params.multiple_scattering:
+        columns.extend(_multiple_pdfs(params, wi, wo).T)
     if params.substrate is not None:
         columns.append(substrate_pdf(params.substrate, wi, wo))
     return np.stack(columns, axis=1)
@@ -370,15 +455,20 @@ def pdf(params: Params, wi, wo):
 def sample(params: Params, wi, u) -> Sample:
     """Sample wo for each wi from u in [0, 1)^3: u0 picks the lobe (then reused), u1 and u2 the direction."""
     wi, u = as_directions(wi), as_directions(u)
-    lobe, chosen, u0 = lobes.choose(_lobe_probabilities(params, wi), u[:, 0])
+    probabilities = _lobe_probabilities(params, wi)
+    lobe, chosen, u0 = lobes.choose(probabilities, u[:, 0])
     wo = -wi.copy()
     for k, layer in enumerate(params.layers):
         m = lobe == k
         wo[m] = _phase_sample(layer, wi[m], u[m, 1], u[m, 2])[0]
+    n_layers, last = len(params.layers), probabilities.shape[1] - 1
+    if params.multiple_scattering:
+        m = (lobe >= n_layers) & (lobe < n_layers + MS_LOBES)
+        wo[m] = _sample_multiple(params, wi[m], lobe[m] - n_layers, np.column_stack([u0[m], u[m, 1:]]))
     if params.substrate is not None:
-        m = lobe == len(params.layers)
+        m = lobe == last
         wo[m] = substrate_sample(params.substrate, wi[m], u0[m], u[m, 1], u[m, 2])
-    is_delta = lobe == len(params.layers) if params.substrate is None else np.zeros(len(wi), bool)
+    is_delta = (lobe == last) & (params.substrate is None) & params.delta_transmission
     density = np.where(is_delta, chosen, pdf(params, wi, wo))
     value = np.where(is_delta[:, None], delta_transmittance(params, wi), eval(params, wi, wo) * np.abs(wo[:, 2:]))
     weight = np.divide(value, density[:, None], out=np.zeros_like(value), where=density[:, None] > 0)

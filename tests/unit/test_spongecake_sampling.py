@@ -25,6 +25,12 @@ CASES = {
                                 substrate=dict(type="conductor", roughness=0.4)),
     "dielectric substrate": dict(layers=[dict(type="hg", roughness=0.3, thickness=0.3)],
                                  substrate=dict(type="dielectric", roughness=0.4, ior=1.5)),
+    "multiple scattering with delta": dict(layers=[dict(type="fiber", roughness=0.5, thickness=0.7,
+                                                        orientation=[1, 0, 0]),
+                                                   dict(type="hg", roughness=0.4, thickness=1.0)],
+                                           delta_transmission=True, multiple_scattering=True),
+    "multiple scattering on a substrate": dict(layers=[dict(type="surface", roughness=0.4, thickness=1.5)],
+                                               substrate=dict(type="diffuse"), multiple_scattering=True),
 }
 INCIDENT = {"above": unit(0.5, 0.3, 0.6), "below": unit(-0.4, 0.5, -0.7)}
 
