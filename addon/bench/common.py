@@ -79,9 +79,11 @@ def mapping_section(model, resolution: int) -> list[str]:
                f"{', '.join(sorted({f'{v.damping:g}' for v in choice.VARIANTS}))}, without and with the Toon lobes, "
                "`nodes.choice.fits_for`: one quadrature for all) from scratch; measure s: the analytic mapping and the "
                "distinct fits on the comparison scenes, the reference's images included (each form with empty caches, "
-               "as a material's first build).", "",
-               "| preset | form | Auto renders | closures analytic → fitted | fit s | measure s |",
-               "|---|---|---|---|---|---|"]
+               "as a material's first build). Operations: the shader's arithmetic that feeds a closure "
+               "(`nodes.budget.shader_size`, what Fit to budget's cost model prices).", "",
+               "| preset | form | Auto renders | closures analytic → fitted | operations analytic → fitted | fit s | "
+               "measure s |",
+               "|---|---|---|---|---|---|---|"]
     with fresh_fit_cache():
         for name in presets.names(model.ID):
             p = model.params_from_dict(presets.load(model.ID, name))
@@ -91,10 +93,12 @@ def mapping_section(model, resolution: int) -> list[str]:
                 fit_seconds = timed(lambda: choice.fits_for(model.ID, p, form))
                 start = time.perf_counter()
                 chosen[form] = choice.choose(model.ID, p, form, "auto")
+                measure_seconds = time.perf_counter() - start
                 fit = choice.choose(model.ID, p, form, "fitted").fit
-                closures = [budget.shader_size(model.ID, p, form, f)[1] for f in (None, fit)]
-                summary.append(f"| {name} | {form} | {chosen[form].used} | {closures[0]} → {closures[1]} | "
-                               f"{fit_seconds:.1f} | {time.perf_counter() - start:.1f} |")
+                (ops, closures), (fitted_ops, fitted_closures) = (budget.shader_size(model.ID, p, form, f)
+                                                                  for f in (None, fit))
+                summary.append(f"| {name} | {form} | {chosen[form].used} | {closures} → {fitted_closures} | "
+                               f"{ops} → {fitted_ops} | {fit_seconds:.1f} | {measure_seconds:.1f} |")
             shaders = {f"{form} {m}": (form, chosen[form].fit if m == "auto" else None)
                        for form in ("osl", "nodes") for m in ("analytic", "auto")}
             errors, means = comparison_errors(model.ID, p, shaders, resolution, ALBEDO_SAMPLES, furnace_width=None)

@@ -78,7 +78,7 @@ def shade(b, model_id: str, p, fit=None) -> None:
     elif isinstance(fit, pruning.Pruned):
         pruning.shade(b, MAPPINGS[model_id], p, fit)
     else:
-        fitted.shade(b, MAPPINGS[model_id], p, fit)
+        fitted.shade(b, MAPPINGS[model_id], p, fit, lambda wo: numpy_backend(model_id, p, b.form, wo))
 
 
 def predicted_eval(model_id: str, p, form: str, fit=None):

@@ -11,7 +11,9 @@ one (its render cost). Per tabulated view cosine the weights minimise the cosine
 reference over (ωi, ωo) (non-negative least squares), with the reference's own directional albedo matched (a
 heavily weighted row). The forward model is ``closures_np``: the fit optimises what Cycles renders. Tables are
 piecewise linear in √cos θo on ``KNOTS`` uniform knots (``view_cosines``; a Color Ramp in node groups, a constant
-array in OSL: both exact).
+array in OSL: both exact). Where a closure's colour follows the view's elevation alone (constant inputs, no layer
+oriented off the normal in it), its table carries colour × scale (``folded_colours``), so the shader no longer
+computes that colour (docs/accuracy.md lists each preset's operations, analytic and fitted).
 
 A driven input (``Driven``: fed by a texture or keyframes) adds an axis: the material is fitted at ``Driven.values``
 (a few values across its range) with one set of closures, and the shader interpolates the tables linearly between
@@ -676,11 +678,42 @@ class ScaledBackend:
 
         return gathered
 
-    def flush(self) -> None:
-        """Emit one closure per atom; an atom the fit set to zero at every view is left out."""
+    def flush(self, folded: dict | None = None) -> None:
+        """Emit one closure per atom; an atom the fit set to zero at every view is left out. An atom in ``folded``
+        ({atom: its colour (KNOTS, 3) at the knots' views}, ``folded_colours``) takes the table of that colour times
+        its scale alone: its own colour math no longer feeds a closure."""
         for g, (method, color, args, kw) in self._atoms.items():
-            if self._fit.scales[g].max() > 0.0:
-                method(color * self.table(self._fit.scales[g]), *args, **kw)
+            scale = self._fit.scales[g]
+            if scale.max() <= 0.0:
+                continue
+            if folded and g in folded:
+                method(self.table(folded[g] * scale), *args, **kw)
+            else:
+                method(color * self.table(scale), *args, **kw)
+
+
+FOLD_AZIMUTHS = (0.0, 1.3, 2.9)  # view azimuths (radians) at which an atom's colour must agree to be folded
+
+
+def folded_colours(mapping, p, fit: Fit, knot_backend) -> dict:
+    """{atom: colour (KNOTS, 3)} of the atoms whose summed colour is a function of the view's elevation alone: the
+    same at every one of ``FOLD_AZIMUTHS`` at each knot's view (``knot_backend(wo)``: a ``NumpyBackend`` of ``p`` at
+    the views ``wo``). Tables are piecewise linear between the knots either way; folding the colour in makes the
+    product colour × scale piecewise linear instead of the scale alone [named: fitted-folded-colour], and leaves the
+    colour's arithmetic out of the shader (constant inputs only: a driven fit keeps its colours)."""
+    if fit.driven is not None:
+        return {}
+    mu = view_cosines()
+    sine = np.sqrt(1.0 - mu * mu)
+    seen = []
+    for phi in FOLD_AZIMUTHS:
+        b = knot_backend(np.stack([sine * math.cos(phi), sine * math.sin(phi), mu], axis=1))
+        gathered = ScaledBackend(b, fit, None)
+        mapping.shade(gathered, p)
+        seen.append({g: np.broadcast_to(np.asarray(color, dtype=np.float64), (len(mu), 3))
+                     for g, (_, color, _, _) in gathered._atoms.items()})
+    return {g: colour for g, colour in seen[0].items()
+            if all(np.allclose(other[g], colour, rtol=1e-9, atol=1e-12) for other in seen[1:])}
 
 
 def tables(b, fit: Fit):
@@ -703,11 +736,12 @@ def tables(b, fit: Fit):
     return interpolated
 
 
-def shade(b, mapping, p, fit: Fit) -> None:
-    """The fitted mapping of ``p`` on backend ``b`` (module docstring)."""
+def shade(b, mapping, p, fit: Fit, knot_backend) -> None:
+    """The fitted mapping of ``p`` on backend ``b`` (module docstring), its colours folded into the tables where
+    they follow the view's elevation alone (``folded_colours``; ``knot_backend(wo)``: a ``NumpyBackend`` of ``p``)."""
     scaled = ScaledBackend(b, fit, tables(b, fit))
     mapping.shade(scaled, p)
-    scaled.flush()
+    scaled.flush(folded_colours(mapping, p, fit, knot_backend))
     for (kind, kw), weights in zip(fit.extras, fit.extra_weights):
         if weights.max() <= 0.0:
             continue

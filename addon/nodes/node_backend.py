@@ -358,7 +358,19 @@ class NodeBackend:
         if self._shader is not None:
             self._locations[self.group_output.name] = ((self._shader[1] + 1) * COLUMN, 0)
             self.links.new(self._shader[0], self.group_output.inputs["BSDF"])
+        self._remove_dead_nodes()
         self._place_nodes()
+
+    def _remove_dead_nodes(self):
+        """Remove the nodes that feed nothing (what only fed a closure a fitted table or pruning replaced): Cycles
+        would skip them, and the group reads better without them."""
+        keep = {self.group_input.name, self.group_output.name}
+        while True:
+            dead = [n for n in self.nodes if n.name not in keep and n.outputs and not any(o.is_linked for o in n.outputs)]
+            if not dead:
+                return
+            for node in dead:
+                self.nodes.remove(node)
 
     def _roughness(self, alpha):
         return self.sqrt(alpha)  # closures in nodes take Blender's roughness r, with α = r² (research notes §6)

@@ -5,7 +5,8 @@ import pytest
 
 from addon import presets
 from addon.models import spongecake, thin_coat
-from addon.nodes import choice, fitted, predicted_eval, predicted_furnace
+from addon import nodes
+from addon.nodes import budget, choice, fitted, predicted_eval, predicted_furnace, pruning
 from addon.nodes.expr import NumpyBackend, OslBackend
 
 
@@ -221,7 +222,7 @@ def test_both_forms_get_the_tables():
     p = _preset(thin_coat, "amber_lacquer")
     fit = choice.choose(thin_coat.ID, p, "osl", "fitted").fit
     b = OslBackend([(s.name, s.kind, s.param.default) for s in thin_coat_sockets(p)])
-    fitted.shade(b, __import__("addon.nodes", fromlist=["MAPPINGS"]).MAPPINGS[thin_coat.ID], p, fit)
+    nodes.shade(b, thin_coat.ID, p, fit)
     source = b.source("t", "//")
     rendered = sum(scales.max() > 0.0 for scales in fit.scales)  # an atom set to zero everywhere is left out
     assert source.count(f"[{fitted.KNOTS}] = {{") == rendered + len(fit.extras)
@@ -406,3 +407,41 @@ def test_the_fit_solves_on_one_blas_thread_and_gives_the_count_back(monkeypatch)
         assert get() == 2
     finally:
         put(before)
+
+
+@pytest.mark.parametrize("model, name", [(thin_coat, "varnished_metal"), (spongecake, "leaf"), (spongecake, "fabric")])
+def test_folded_colours_render_the_same_at_the_knots_with_fewer_operations(model, name):
+    """Where an atom's colour follows the view's elevation alone, its table carries colour × scale
+    (``fitted.folded_colours``): the closures are the same at the knots' views, and the colour's arithmetic is gone
+    from the shader. fabric's oriented fibers see the view's azimuth: those atoms keep their colour math."""
+    p = _preset(model, name)
+    fit = choice.choose(model.ID, p, "osl", "fitted").fit
+    knot_backend = lambda wo: nodes.numpy_backend(model.ID, p, "osl", wo)
+    folded = fitted.folded_colours(nodes.MAPPINGS[model.ID], p, fit, knot_backend)
+    rendered = {g for g, scales in enumerate(fit.scales) if scales.max() > 0.0}
+    if name == "fabric":
+        assert 0 < len(folded) < len(set(fit.groups))
+    else:
+        assert rendered <= set(folded)
+    mu = fitted.view_cosines()
+    wo = np.stack([np.sqrt(1.0 - mu * mu) * np.cos(0.4), np.sqrt(1.0 - mu * mu) * np.sin(0.4), mu], axis=1)
+
+    def closures(fold):
+        b = knot_backend(wo)
+        scaled = fitted.ScaledBackend(b, fit, fitted.tables(b, fit))
+        nodes.MAPPINGS[model.ID].shade(scaled, p)
+        scaled.flush(folded if fold else None)
+        return [np.broadcast_to(color, (len(wo), 3)) for _, color, _ in b.closures]
+
+    for plain, with_fold in zip(closures(False), closures(True)):
+        np.testing.assert_allclose(with_fold, plain, rtol=1e-9, atol=1e-12)
+    def operations(fold):
+        b = OslBackend([(s.name, s.kind, s.param.default) for s in nodes.MAPPINGS[model.ID].sockets(p)], "osl")
+        scaled = fitted.ScaledBackend(b, fit, fitted.tables(b, fit))
+        nodes.MAPPINGS[model.ID].shade(scaled, p)
+        scaled.flush(folded if fold else None)
+        return pruning.live_operations(b.lines, b.closures + [c for cs in b.lamberts.values() for c in cs])
+
+    assert operations(True) < operations(False)
+    if name != "fabric":
+        assert budget.shader_size(model.ID, p, "osl", fit)[0] < budget.shader_size(model.ID, p, "osl", None)[0]
