@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .frames import spherical
+
 
 def choose(p, u0):
     """For probabilities ``p`` (N, K) and uniforms ``u0`` (N,): the lobe each u0 picks, its probability, and u0
@@ -15,3 +17,13 @@ def choose(p, u0):
     chosen = p[rows, lobe]
     reused = np.clip((u0 - (cdf[rows, lobe] - chosen)) / chosen, 0.0, np.nextafter(1.0, 0.0))
     return lobe, chosen, reused
+
+
+def cosine_sample(side, u1, u2):
+    """Cosine-weighted directions (N, 3) about +z where ``side`` is 1, about -z where it is -1."""
+    return np.asarray(side, float).reshape(-1, 1) * spherical(np.sqrt(1.0 - u1), 2.0 * np.pi * u2)
+
+
+def cosine_pdf(side, w):
+    """Density of ``cosine_sample``: max(side * cos θ, 0) / π."""
+    return np.maximum(side * w[:, 2], 0.0) / np.pi

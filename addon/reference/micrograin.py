@@ -644,7 +644,7 @@ def pdf(params: Params, wi, wo):
     """Solid-angle density (N,) of ``sample`` (it integrates to 1 minus the probability of a bulk's Dirac)."""
     wi, wo = as_directions(wi), as_directions(wo)
     p = _lobe_probabilities(params, wi)
-    return (p[:, 0] * _specular_pdf(params, wi, wo) + p[:, 1] * np.maximum(wo[:, 2], 0.0) / np.pi
+    return (p[:, 0] * _specular_pdf(params, wi, wo) + p[:, 1] * lobes.cosine_pdf(1.0, wo)
             + p[:, 2] * _bulk_pdf(params.bulk, wi, wo))
 
 
@@ -658,7 +658,7 @@ def sample(params: Params, wi, u) -> Sample:
     m = lobe == 0
     wo[m] = reflect(wi[m], sample_ndf(params.filling_factor, params.anfractuosity, u[m, 1], u[m, 2]))
     m = lobe == 1
-    wo[m] = spherical(np.sqrt(1.0 - u[m, 1]), 2.0 * np.pi * u[m, 2])
+    wo[m] = lobes.cosine_sample(1.0, u[m, 1], u[m, 2])
     m = lobe == 2
     if m.any():
         wo[m], delta[m] = _bulk_sample(params.bulk, wi[m], np.stack([u0[m], u[m, 1], u[m, 2]], axis=1))

@@ -179,7 +179,7 @@ def substrate_pdf(sub: Substrate, wi, wo):
         return microfacet.dielectric_pdf(wi, wo, sub.roughness, sub.ior)
     side = np.where(_above(wi), 1.0, -1.0)
     if sub.type == "diffuse":
-        return np.maximum(side * wo[:, 2], 0.0) / np.pi
+        return lobes.cosine_pdf(side, wo)
     return microfacet.reflection_pdf(side[:, None] * wi, side[:, None] * wo, sub.roughness)
 
 
@@ -187,10 +187,10 @@ def substrate_sample(sub: Substrate, wi, u0, u1, u2):
     """Cosine-weighted directions (diffuse), reflected GGX visible normals (conductor), Walter 2007 (dielectric)."""
     if sub.type == "dielectric":
         return microfacet.dielectric_sample(wi, sub.roughness, sub.ior, u0, u1, u2)
-    side = np.where(_above(wi), 1.0, -1.0)[:, None]
+    side = np.where(_above(wi), 1.0, -1.0)
     if sub.type == "diffuse":
-        return side * spherical(np.sqrt(1.0 - u1), 2.0 * np.pi * u2)
-    return side * microfacet.conductor_sample(side * wi, sub.roughness, u1, u2)
+        return lobes.cosine_sample(side, u1, u2)
+    return side[:, None] * microfacet.conductor_sample(side[:, None] * wi, sub.roughness, u1, u2)
 
 
 def _substrate_eval(params: Params, wi, wo):
@@ -357,11 +357,11 @@ def _normalised(p, n_continuous):
     return np.where(total > 0, p / np.where(total > 0, total, 1.0), fallback)
 
 
-def _intercepted(params: Params, wi):
+def _intercepted(params: Params, wi, weights=None):
     """(N,) the light a stack scatters once from wi, roughly: P(first collision in layer k) times the layer's mean
-    albedo, summed (the substrate and the Dirac at full weight)."""
+    albedo, summed (the substrate and the Dirac at full weight). ``weights``: ``_single_weights``, when known."""
     albedo = [np.mean(layer.albedo) for layer in params.layers] + [1.0] * (params.substrate is not None)
-    weights = _single_weights(params, wi)
+    weights = _single_weights(params, wi) if weights is None else weights
     return weights[:, : len(albedo)] @ np.asarray(albedo) + weights[:, len(albedo):].sum(axis=1)
 
 
@@ -390,15 +390,15 @@ def _lobe_probabilities(params: Params, wi):
     """(N, lobes) selection probabilities: the layers, then with multiple scattering its ``MS_LOBES`` lobes, then the
     substrate or the Dirac when present (last). Single scattering keeps its own proportions (Sec. 4.5); multiple
     scattering takes its rough share of the light returned, W_ms / (W_ms + ``_intercepted``)."""
-    single = _single_weights(params, wi)
+    weights = _single_weights(params, wi)
     n_layers = len(params.layers)
     n_continuous = n_layers + (params.substrate is not None)
-    single = _normalised(single, n_continuous)
+    single = _normalised(weights, n_continuous)
     if not params.multiple_scattering:
         return single
     multiple = _multiple_weights(params, wi)
     total = multiple.sum(axis=1, keepdims=True)
-    share = total / np.maximum(total + _intercepted(params, wi)[:, None], 1e-300)
+    share = total / np.maximum(total + _intercepted(params, wi, weights)[:, None], 1e-300)
     multiple = share * np.divide(multiple, total, out=np.zeros_like(multiple), where=total > 0)
     single = (1.0 - share) * single
     return np.concatenate([single[:, :n_layers], multiple, single[:, n_layers:]], axis=1)
@@ -413,8 +413,8 @@ def _multiple_pdfs(params: Params, wi, wo):
     side = np.where(up, 1.0, -1.0)
     return np.stack([np.where(up, pdf(pred.lobe, wi, wo), pdf(pred.lobe_below, wi, wo)),
                      np.where(up, pdf(pred.forward, wi, wo), pdf(pred.forward_below, wi, wo)),
-                     np.maximum(side * wo[:, 2], 0.0) / np.pi,
-                     np.maximum(-side * wo[:, 2], 0.0) / np.pi], axis=1)
+                     lobes.cosine_pdf(side, wo),
+                     lobes.cosine_pdf(-side, wo)], axis=1)
 
 
 def _sample_multiple(params: Params, wi, lobe, u):
@@ -429,10 +429,9 @@ def _sample_multiple(params: Params, wi, lobe, u):
         for side, stack in ((up, lobe_above), (~up, lobe_below)):
             m = (lobe == k) & side
             wo[m] = sample(stack, wi[m], u[m]).wo
-    side = np.where(up, 1.0, -1.0)[:, None]
-    cosine = spherical(np.sqrt(1.0 - u[:, 1]), 2.0 * np.pi * u[:, 2])
-    wo = np.where((lobe == 2)[:, None], side * cosine, wo)
-    return np.where((lobe == 3)[:, None], -side * cosine, wo)
+    side = np.where(up, 1.0, -1.0)
+    wo = np.where((lobe == 2)[:, None], lobes.cosine_sample(side, u[:, 1], u[:, 2]), wo)
+    return np.where((lobe == 3)[:, None], lobes.cosine_sample(-side, u[:, 1], u[:, 2]), wo)
 
 
 def _lobe_pdfs(params: Params, wi, wo):

@@ -42,7 +42,7 @@ import numpy as np
 from ..models.thin_coat import Params, params_from_dict  # noqa: F401  (the Python API: reference.thin_coat)
 from . import lobes as lobe_choice
 from . import microfacet, vmf
-from .frames import as_directions, dot, normalize, reflect, spherical
+from .frames import as_directions, dot, normalize, reflect
 
 # ``sample(p, wo, u)`` draws the light direction for a view (the model is built from the view), the opposite of
 # the other references; a model bulk under a porous layer is sampled accordingly (``micrograin.samples_from_view``).
@@ -337,7 +337,7 @@ def _lobe_pdf(lobe: Lobe, wi, wo):
     """Density of ``_lobe_sample``: cosine (diffuse), the vMF around −wo (transmission), else the (E)NDF's
     reflection density."""
     if lobe.kind == "diffuse":
-        return np.maximum(wi[:, 2], 0.0) / np.pi
+        return lobe_choice.cosine_pdf(1.0, wi)
     if lobe.kind == "transmission":
         return vmf.density_around(wi, -wo, lobe.kappa)
     return _reflection_pdf(lobe.kappa, wi, wo)
@@ -346,7 +346,7 @@ def _lobe_pdf(lobe: Lobe, wi, wo):
 def _lobe_sample(lobe: Lobe, wo, u1, u2):
     kappa = np.broadcast_to(np.asarray(lobe.kappa if lobe.kappa is not None else 0.0), (len(wo),))
     if lobe.kind == "diffuse":
-        return spherical(np.sqrt(u1), 2.0 * np.pi * u2)
+        return lobe_choice.cosine_sample(1.0, u1, u2)
     if lobe.kind == "transmission":
         return vmf.sample_around(-wo, kappa, u1, u2)
     return reflect(wo, vmf.sample(kappa, u1, u2))
