@@ -14,7 +14,7 @@ DATA ?= $(HOME)/.cache/lamina/spongecake-ms
 # Neural participating media: tables of double and multiple scattering per material (resumable; docs/training.md).
 MEDIUM_DATA ?= $(HOME)/.cache/lamina/neural-medium
 
-.PHONY: venv test test-5.0 test-unit test-unit-1 test-unit-2 test-blender-5.0 test-4.2 test-all demo bench assets extension dataset train train-1 train-2 validation-set medium-dataset medium-networks clean
+.PHONY: venv test test-5.0 test-unit test-unit-1 test-unit-2 test-blender-5.0 test-4.2 test-all demo bench assets extension dataset train train-1 train-2 train-energy validation-set medium-dataset medium-networks clean
 
 venv: $(VENV)/.stamp
 
@@ -80,6 +80,12 @@ train: venv
 
 train-1 train-2: venv
 	$(PY) -m training.train --data $(DATA) --layers $(subst train-,,$@) --threads 1 --minutes $(TRAIN_MINUTES) --out addon/bake/weights
+
+# The energy-fraction networks (the share of what single scattering leaves that multiple scattering returns), one
+# after the other on 2 cores, ENERGY_MINUTES each; their targets' single-scattering albedos are cached beside the data.
+ENERGY_MINUTES ?= 10
+train-energy: venv
+	$(PY) -m training.energy_train --data $(DATA) --layers 1 2 --threads 2 --minutes $(ENERGY_MINUTES) --out addon/bake/weights
 
 # The neural_medium tables: 56 materials (7 albedos x 8 g), about an hour on 2 cores, resumable; and 4 materials
 # between the grid's albedos, only for evaluating the networks off the grid.

@@ -66,11 +66,12 @@ ALPHA_RANGE = (0.01, 1.0)
 G_MAX = 0.95
 THICKNESS_IN = (0.01, 10.0)
 THICKNESS_OUT = (0.01, 20.0)
-MS_VERSION = 9  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
+MS_VERSION = 10  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
 # stack's scale over the view's azimuth too (``nodes.spongecake.view_inputs``), 5 the energy budget (``energy_budget``),
 # 6 its view tables made safe along the view cosine too (``budget_rows``), 7 the forward lobe (``decode``), 8 each
 # form's budget on its own prediction (the node group's merged fiber lobes: ``nodes.spongecake._FiberLobes``), 9 one
-# ``MS Energy`` input fed from a view table for every stack (``nodes.spongecake.budget_table``)
+# ``MS Energy`` input fed from a view table for every stack (``nodes.spongecake.budget_table``), 10 the energy
+# fraction's network for stacks without a substrate (``energy_fraction``)
 NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 
@@ -85,10 +86,21 @@ def network(n_layers: int) -> mlp.MLP:
     return mlp.load(weights_path(min(n_layers, NETWORK_LAYERS)))
 
 
+def energy_weights_path(n_layers: int) -> Path:
+    return WEIGHTS / f"spongecake_ms_energy_{n_layers}layer.npz"
+
+
+def energy_network(n_layers: int) -> mlp.MLP:
+    """The network that predicts the energy fraction (``energy_fraction``) of stacks of ``n_layers`` (deeper ones:
+    the two-layer network on the lumped stack)."""
+    return mlp.load(energy_weights_path(min(n_layers, NETWORK_LAYERS)))
+
+
 def ms_identity(n_layers: int) -> list:
-    """What a stack's multiple scattering comes from: the manifest of the network that predicts it and the version
-    of what is made from the prediction (``MS_VERSION``, e.g. the energy scale); part of bake keys and fit keys."""
-    return [network(n_layers).manifest, MS_VERSION]
+    """What a stack's multiple scattering comes from: the manifests of the networks that predict it (lobes and
+    energy fraction) and the version of what is made from the prediction (``MS_VERSION``, e.g. the energy scale);
+    part of bake keys and fit keys."""
+    return [network(n_layers).manifest, energy_network(n_layers).manifest, MS_VERSION]
 
 
 # ------------------------------------------------------------------------------------------- encoding
@@ -279,6 +291,68 @@ def _prediction(lobes, weights) -> Prediction:
                       below, tuple(weights[1, W2R]), tuple(weights[1, W2T]), forward_params(weights[1]))
 
 
+# ------------------------------------------------------------------------------------ energy fraction
+
+def channel_rows(rows: np.ndarray, c: int) -> np.ndarray:
+    """Rows (N, L, ROW) whose albedo and f0 are channel ``c``'s in all three channels: the channels are independent
+    random-walk experiments, so the energy network sees one channel at a time."""
+    out = np.array(rows, dtype=np.float64)
+    out[..., rows_.ALBEDO] = out[..., rows_.ALBEDO][..., c:c + 1]
+    out[..., rows_.F0] = out[..., rows_.F0][..., c:c + 1]
+    return out
+
+
+ENERGY_FEATURES = FEATURES + 3  # per layer: ``features``, √(1 − albedo), √(1 − f0), log(albedo f0) of the channel
+LOG_ENERGY_FLOOR = 1e-3  # the least albedo f0 the last of them tells apart
+
+
+def energy_inputs(rows: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """(N, 3, L ENERGY_FEATURES + 3) inputs of the energy network for stacks (N, L ≤ 2, ROW) seen along w (N, 3) from
+    above, per channel: per layer ``features`` of the channel's rows, √(1 − albedo) and √(1 − f0) (multiply
+    scattered light falls like √(1 − albedo) near white: similarity theory), log(albedo f0) / |log floor| (each
+    bounce multiplies by about albedo f0, so the share left after a few is a power of it), then w in the stack's
+    frame."""
+    rows, w = np.asarray(rows, dtype=np.float64), np.asarray(w, dtype=np.float64)
+    n, n_layers = rows.shape[:2]
+
+    def of_channel(c):
+        one = channel_rows(rows, c)
+        albedo, f0 = one[..., rows_.ALBEDO.start], one[..., rows_.F0.start]
+        near_white = np.sqrt(np.clip(1.0 - np.stack([albedo, f0], axis=-1), 0.0, 1.0))
+        per_bounce = np.log(np.maximum(albedo * f0, LOG_ENERGY_FLOOR)) / -math.log(LOG_ENERGY_FLOOR)
+        per_layer = np.concatenate([features(one).reshape(n, n_layers, FEATURES), near_white, per_bounce[..., None]],
+                                   axis=2)
+        return np.concatenate([per_layer.reshape(n, -1), w], axis=1)
+
+    return np.stack([of_channel(c) for c in range(3)], axis=1)
+
+
+def fraction_rows(rows: np.ndarray, w: np.ndarray, net: mlp.MLP | None = None) -> np.ndarray:
+    """The energy fraction (N, 3) of stacks (N, L, ROW) seen along w (N, 3) from above: the share of what single
+    scattering and the Dirac leave that multiple scattering returns (``energy_fraction``); the shipped network for L
+    layers, or ``net``; more than ``NETWORK_LAYERS`` layers lumped (``lumped_rows``)."""
+    rows = np.asarray(rows, dtype=np.float64)
+    net = net or energy_network(rows.shape[1])
+    if rows.shape[1] > NETWORK_LAYERS:
+        rows = lumped_rows(rows)[0]
+    x = energy_inputs(rows, w)
+    raw = net(x.reshape(-1, x.shape[-1])).reshape(len(rows), 3)
+    return 1.0 / (1.0 + np.exp(-np.clip(raw, -60.0, 60.0)))
+
+
+def energy_fraction(params: model.Params, w: np.ndarray, net: mlp.MLP | None = None) -> np.ndarray:
+    """(N, 3) the share q(ω) of left = 1 − A_ss − T_δ (what single scattering and the Dirac leave of the light
+    arriving along ω) that multiple scattering returns, predicted for the stack's layers without a substrate: views
+    above by the stack, views below by the flipped stack (as the lobes). By reciprocity q at a view is q for light
+    from that direction, what the network was trained on (``training.energy_train``)."""
+    w = np.asarray(w, dtype=np.float64)
+    up = w[:, 2] > 0
+    rows = np.where(up[:, None, None], rows_.stack_rows(params)[None], rows_.flipped(rows_.stack_rows(params))[None])
+    seen_from_above = w.copy()
+    seen_from_above[:, 2] = np.abs(w[:, 2])
+    return fraction_rows(rows, seen_from_above, net)
+
+
 def forward_params(weights) -> model.Params:
     """The forward lobe of one row of decoded weights (``decode``) as a one-layer hg stack."""
     return model.Params((model.Layer("hg", float(weights[FORWARD_G]), tuple(map(float, weights[FORWARD_ALBEDO])),
@@ -312,14 +386,14 @@ def energy_budget(left, lobes, limit=1.0):
 WHITENESS_POWER = 16  # the whiteness of a stack: its smallest albedo to this power (``whiteness_of``)
 
 
-def whiteness_of(params: model.Params) -> np.ndarray:
+def whiteness_of(params: model.Params, power: int = WHITENESS_POWER) -> np.ndarray:
     """(3,) how close a stack is to white, per channel: its smallest albedo (layers and a diffuse substrate) to the
-    power ``WHITENESS_POWER`` (1 for white, 0.44 at 0.95, 0.03 at 0.8): light scattered many times has met the
+    ``power`` (``WHITENESS_POWER``: 1 for white, 0.44 at 0.95, 0.03 at 0.8): light scattered many times has met the
     darkest scatterer."""
     albedos = [layer.albedo for layer in params.layers]
     if params.substrate is not None and params.substrate.type == "diffuse":
         albedos.append(params.substrate.albedo)
-    return np.min(np.asarray(albedos, dtype=np.float64), axis=0) ** WHITENESS_POWER
+    return np.min(np.asarray(albedos, dtype=np.float64), axis=0) ** power
 
 
 def budget_rows(params: model.Params, left_of, lobes_of, rows: int, phi, substeps: int,
@@ -421,12 +495,34 @@ def energy_grid(params: model.Params, left_of, lobes_of, mu, phi, side: float = 
 
     left, lobes = albedos(params)
     limit, whiteness = 1.0, whiteness_of(params)
-    if model.conserving(params) and whiteness.max() > NEGLIGIBLE_WHITENESS:
+    if params.substrate is None:
+        limit = fraction_limit(params, wo, mu, left, lobes)
+    elif model.conserving(params) and whiteness.max() > NEGLIGIBLE_WHITENESS:
         if np.all(whiteness == 1.0):  # already white: the white stack is this one
             limit = white_limit(left, lobes, whiteness)
         else:
             limit = white_limit(*albedos(model.white(params)), whiteness)
     return scale_of(left, lobes, limit).reshape(len(mu), len(phi), 3)
+
+
+# A white stack's energy fraction is 1 (what single scattering leaves, multiple scattering returns); within the
+# network's error of it for stacks close to white: their fraction moves to 1 by their smallest albedo to this power
+# (0.77 at 0.999, 0.08 at 0.99).
+FRACTION_WHITENESS_POWER = 256
+MAX_SCALE = 20.0  # the most the energy fraction may scale the network's lobes by (their own energy is then tiny)
+
+
+def fraction_limit(params: model.Params, wo, mu, left, lobes) -> np.ndarray:
+    """The energy scale's limit (len(wo), 3) for a stack without a substrate: q left / E, the scale that gives the
+    lobes the energy fraction q (``energy_fraction``) of what single scattering and the Dirac leave, at most
+    ``MAX_SCALE``; q moves to 1 for stacks that conserve energy once white, by their whiteness
+    (``FRACTION_WHITENESS_POWER``), so that a white stack returns exactly what it receives less the margin."""
+    fraction = _normal_view_averaged(energy_fraction(params, wo), mu)
+    if model.conserving(params):
+        white = whiteness_of(params, FRACTION_WHITENESS_POWER)
+        fraction = white + (1.0 - white) * fraction
+    target = fraction * np.maximum(left, 0.0)
+    return np.minimum(np.divide(target, lobes, out=np.full_like(target, MAX_SCALE), where=lobes > 1e-9), MAX_SCALE)
 
 
 def _normal_view_averaged(albedo, mu):

@@ -11,10 +11,11 @@ from pathlib import Path
 import numpy as np
 
 from . import layer_rows
-from ..reference.spongecake import eval_multiple
-from .spongecake import network, predict_with
+from ..reference.spongecake import eval_multiple, leftover
+from .spongecake import fraction_rows, network, predict_with
 
 ARRAYS = ("rows", "wi", "wo", "ms", "ms_half_diff", "ss")
+ENERGY_ARRAYS = ("rows", "wi", "unscattered", "single", "multiple")  # ``training.energy_train``'s tallies
 
 
 def load_shards(folder, n_layers: int) -> dict:
@@ -66,3 +67,46 @@ def lobe_errors(data: dict, predicted: np.ndarray | None = None) -> dict:
         noise = (np.abs(data["ms_half_diff"]) * cos_o).sum(axis=(1, 2, 3)) / safe
         out["mean_monte_carlo_noise"] = float(noise[keep].mean())
     return {**out, "per_config": np.where(keep, rel, np.nan).tolist()}
+
+
+# ------------------------------------------------------------------------------ the energy fraction network
+
+def load_energy_set(path, n_layers: int) -> dict:
+    """One layer count of an energy held-out file (``training.energy_train --validation-set``): ``ENERGY_ARRAYS``."""
+    with np.load(path) as f:
+        return {k: f[f"layers{n_layers}_{k}"] for k in ENERGY_ARRAYS}
+
+
+def energy_samples(data: dict, left: np.ndarray | None = None) -> dict:
+    """Flat (stack, wi, channel) ``left`` (the walk's own, 1 − T_δ − E_1, unless given), the multiple-scattering
+    energy (``energy``, the walk's orders ≥ 2) and each sample's stack (``config``)."""
+    n_c, n_wi = data["wi"].shape[:2]
+    if left is None:
+        left = 1.0 - data["unscattered"] - data["single"]
+    return {"left": np.asarray(left).reshape(-1), "energy": data["multiple"].reshape(-1),
+            "config": np.repeat(np.arange(n_c), n_wi * 3)}
+
+
+def fraction_errors(q: np.ndarray, samples: dict) -> np.ndarray:
+    """Per stack, the relative energy error |Σ q left − Σ E_ms| / Σ E_ms over its wi and channels (as ``lobe_errors``
+    scores a lobe's energy); stacks with less than 1e-3 of the largest energy are left out (NaN)."""
+    n = samples["config"].max() + 1
+    predicted = np.bincount(samples["config"], weights=q * samples["left"], minlength=n)
+    truth = np.bincount(samples["config"], weights=samples["energy"], minlength=n)
+    return np.where(truth > 1e-3 * truth.max(), np.abs(predicted - truth) / np.maximum(truth, 1e-300), np.nan)
+
+
+def error_summary(errors: np.ndarray) -> dict:
+    kept = errors[~np.isnan(errors)]
+    return {"configs": int(len(kept)), "mean_relative_energy_error": float(kept.mean()),
+            "median_relative_energy_error": float(np.median(kept)), "worst_relative_energy_error": float(kept.max())}
+
+
+def energy_errors(path, n_layers: int, net=None) -> dict:
+    """The energy network (shipped, or ``net``) on a held-out energy file as the add-on evaluates q (numpy), times
+    left from the reference (``leftover``, the add-on's samples), against the walk's E_ms; with ``per_config``."""
+    data = load_energy_set(path, n_layers)
+    left = np.stack([leftover(layer_rows.params_from_rows(stack), wi) for stack, wi in zip(data["rows"], data["wi"])])
+    q = fraction_rows(np.repeat(data["rows"], data["wi"].shape[1], axis=0), data["wi"].reshape(-1, 3), net)
+    errors = fraction_errors(q.reshape(-1), energy_samples(data, left))
+    return {**error_summary(errors), "per_config": [None if np.isnan(e) else float(e) for e in errors]}

@@ -171,6 +171,7 @@ class MsSizes:
 
     validation: str = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
                                    "tests", "data", "spongecake_ms_validation")
+    energy_validation: str = os.path.join(os.path.dirname(validation), "spongecake_ms_energy_validation.npz")
     failure_paths: int = 4000  # random-walk paths per wi for the low-roughness fiber configurations
     failure_wi: int = 4  # a square number: incident directions per configuration
     failure_wo: int = 64  # twice a square number: outgoing directions over the sphere
@@ -530,6 +531,8 @@ def ms_render_times(names, samples: int, resolution: int, repeats: int) -> list[
 
 
 def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
+    from ..bake import validation
+
     lines = ["", "## Multiple scattering", "",
              "The network's lobes (Sec. 5) against the reference's independent random walk (orders ≥ 2). "
              + weights_note(), ""]
@@ -551,6 +554,21 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
                          f"{pct(v['mean_monte_carlo_noise'])} |")
     else:
         lines.append("Not measured: the validation set is missing (`make validation-set`).")
+    lines += ["", "### Energy fraction network, held-out energy set", "",
+              "`addon.bake.validation.energy_errors` on `tests/data/spongecake_ms_energy_validation.npz` (independent "
+              "seed, never trained on; the random walk's tally of the light leaving by orders ≥ 2, 16 wi × 16000 "
+              "paths per stack): the network's share q of what single scattering and the Dirac leave, times that "
+              "leftover from the reference, against the walk, per stack summed over wi and channels "
+              "(docs/training.md, *The energy fraction network*).", ""]
+    if os.path.exists(sizes.energy_validation):
+        lines += ["| layers | stacks | mean energy error | median | worst |", "|---|---|---|---|---|"]
+        for n in (1, 2):
+            v = validation.energy_errors(sizes.energy_validation, n)
+            lines.append(f"| {n} | {v['configs']} | {pct(v['mean_relative_energy_error'])} | "
+                         f"{pct(v['median_relative_energy_error'])} | {pct(v['worst_relative_energy_error'])} |")
+    else:
+        lines.append("Not measured: the energy validation set is missing (`python -m training.energy_train "
+                     "--validation-set FILE`).")
     # --- failure case
     fail = failure_case_errors(sizes)
     lines += ["", "### The paper's failure case: low-roughness fibers", "",

@@ -25,8 +25,10 @@ Conventions (local frame, z = macro normal; ``wi`` points to the light, ``wo`` t
   single scattering and the Dirac leave (whether the Dirac is rendered or not), E the directional albedo of the
   network's lobes, m = ``ENERGY_MARGIN`` (0.3%) a margin for the noise of their estimates: single plus multiple
   scattering never return more than they receive.
-  The limit is 1 (the network's energy wherever it fits in), except for stacks that conserve energy once white
-  (``models.spongecake.conserving``: no Fresnel flakes, no substrate or a diffuse one), where it moves towards
+  Without a substrate the limit is q left / E: the energy network's fraction q(ωo) of what is left
+  (``bake.spongecake.energy_fraction``, ``fraction_limit``; q taken to 1 for white stacks that conserve energy).
+  Over a substrate it is 1 (the network's energy wherever it fits in), except for stacks that conserve energy once
+  white (``models.spongecake.conserving``: no Fresnel flakes, a diffuse substrate), where it moves towards
   left_white / E_white, the scale that gives the white stack exactly its leftover, by the stack's whiteness
   (``bake.spongecake.whiteness_of``): a white isotropic stack returns what it receives less m at the knots. The
   scale follows the view alone, as a Cycles closure weight does, so the scaled lobes are reciprocal only where it
@@ -295,7 +297,7 @@ def _energy_tables(params: Params, weights: str):
     from ..bake.spongecake import energy_table, predict
 
     def left_of(stack, wo):
-        return _left(replace(stack, multiple_scattering=False), wo)
+        return leftover(replace(stack, multiple_scattering=False), wo)
 
     def lobes_of(stack, wo):
         return network_albedo(stack, predict(stack), wo)
@@ -306,10 +308,11 @@ def _energy_tables(params: Params, weights: str):
     return above, below
 
 
-def _left(params: Params, wo):
-    """1 - A_ss - T_delta towards wo (N, 3): what single scattering and the Dirac (rendered or not) leave."""
+def leftover(params: Params, wo, n: int = ENERGY_SAMPLES):
+    """1 - A_ss - T_delta towards wo (N, 3): what single scattering and the Dirac (rendered or not) leave; A_ss by
+    ``directional_albedo`` with ``n`` directions per view."""
     through = np.exp(-_optical_depths(params, wo).sum(axis=0))[:, None] * (params.substrate is None)
-    return 1.0 - directional_albedo(params, wo, n=ENERGY_SAMPLES) - through
+    return 1.0 - directional_albedo(params, wo, n=n) - through
 
 
 def network_albedo(params: Params, pred, wo):

@@ -1,0 +1,129 @@
+"""SpongeCake multiple scattering's energy fraction network (issue 15, part 1): numpy inference against torch, the
+quick train → export → load pipeline, the augmentation's symmetry, the side a view picks, the white limit, and the
+shipped weights against their recorded held-out error."""
+import json
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from addon.bake import layer_rows, mlp, validation  # noqa: E402
+from addon.bake import spongecake as ms  # noqa: E402
+from addon.models import spongecake as model  # noqa: E402
+from addon.reference import spongecake as ref  # noqa: E402
+from training import dataset, energy_train  # noqa: E402
+
+
+def _rows(n_layers, n=32, seed=3):
+    return dataset.sample_layers(np.random.default_rng(seed), n, n_layers)
+
+
+def _upper(n, seed=5):
+    return dataset.stratified_hemisphere(np.random.default_rng(seed), n)
+
+
+@pytest.mark.parametrize("n_layers", [1, 2])
+def test_numpy_fraction_matches_torch_through_the_shipped_float32_format(n_layers, tmp_path):
+    torch.manual_seed(n_layers)
+    net = energy_train.make_network(n_layers * ms.ENERGY_FEATURES + 3)
+    with torch.no_grad():
+        net[-1].weight.mul_(200.0)  # far from a constant output, so the test can fail
+    path = tmp_path / "energy.npz"
+    exported = energy_train.to_mlp(net, {"layers": n_layers})
+    mlp.save(path, exported.weights, exported.biases, exported.manifest)
+    rows, w = _rows(n_layers, 36), _upper(36)
+    x = ms.energy_inputs(rows, w)
+    with torch.no_grad():
+        expected = torch.sigmoid(net(torch.as_tensor(x.reshape(-1, x.shape[-1]), dtype=torch.float32)))
+    q = ms.fraction_rows(rows, w, mlp.load(path))
+    np.testing.assert_allclose(q, expected.numpy().reshape(-1, 3), rtol=1e-4, atol=1e-6)
+    assert q.std() > 0.01
+
+
+def test_the_augmentation_turns_the_inputs_of_a_stack_into_those_of_the_turned_stack():
+    """Rotating and mirroring orientations and the direction about the normal is an exact symmetry of SpongeCake;
+    ``rotated`` must give the inputs of the turned stack seen along the turned direction."""
+    n_layers, rows, w = 2, _rows(2, 64), _upper(64)
+    x = ms.energy_inputs(rows, w)[:, 0]
+    generator = torch.Generator().manual_seed(3)
+    turned = energy_train.rotated(torch.as_tensor(x), n_layers, generator).numpy()
+    angle = torch.rand(64, generator=torch.Generator().manual_seed(3)).numpy() * 2.0 * np.pi
+    assert not np.allclose(turned, x)
+    c, s = np.cos(angle), np.sin(angle)
+    for k in range(64):  # the sample's turn is its angle's, mirrored or not: check the whole input under each
+        for sign in (1.0, -1.0):
+            turn = np.array([[c[k], -s[k], 0], [s[k], c[k], 0], [0, 0, 1]]) @ np.diag([1.0, sign, 1.0])
+            if np.allclose(turn @ w[k], turned[k, -3:], atol=1e-6):
+                stack = rows[k:k + 1].copy()
+                stack[0, :, layer_rows.ORIENTATION] = stack[0, :, layer_rows.ORIENTATION] @ turn.T
+                expected = ms.energy_inputs(stack, (turn @ w[k])[None])[0, 0]
+                np.testing.assert_allclose(turned[k], expected, atol=1e-5)
+                break
+        else:
+            pytest.fail(f"sample {k}: the direction was not turned by a rotation (and mirror) about the normal")
+
+
+def test_a_view_from_below_takes_the_flipped_stack_seen_from_above():
+    p = ref.params_from_dict({"layers": [
+        {"type": "surface", "roughness": 0.2, "albedo": [0.9, 0.5, 0.2], "thickness": 0.5,
+         "orientation": [0.6, 0.0, 0.8]},
+        {"type": "fiber", "roughness": 0.4, "albedo": [0.7, 0.7, 0.7], "thickness": 2.0}]})
+    w = _upper(16)
+    below = w * np.array([1.0, 1.0, -1.0])
+    flipped = layer_rows.flipped(layer_rows.stack_rows(p))
+    np.testing.assert_allclose(ms.energy_fraction(p, below), ms.fraction_rows(np.repeat(flipped[None], 16, 0), w))
+    assert not np.allclose(ms.energy_fraction(p, below), ms.energy_fraction(p, w))
+    q = ms.energy_fraction(p, np.concatenate([w, below]))
+    assert np.all((q > 0) & (q < 1))
+
+
+def test_a_white_stack_gets_all_that_single_scattering_leaves_and_a_dark_one_the_networks_share():
+    mu = np.asarray(model.energy_cosines())
+    wo = ref.spherical(mu, np.zeros_like(mu))
+    left = np.full((len(mu), 3), 0.4)
+    lobes = np.full((len(mu), 3), 0.1)
+    white = ref.params_from_dict({"layers": [{"albedo": [1.0, 1.0, 1.0], "thickness": 3.0}]})
+    np.testing.assert_allclose(ms.fraction_limit(white, wo, mu, left, lobes), 4.0)
+    dark = ref.params_from_dict({"layers": [{"albedo": [0.5, 0.5, 0.5], "thickness": 3.0}]})
+    q = ms.energy_fraction(dark, wo)
+    np.testing.assert_allclose(ms.fraction_limit(dark, wo, mu, left, lobes)[:-1], 4.0 * q[:-1], rtol=1e-12)
+    assert np.all(q < 0.5)
+    np.testing.assert_allclose(ms.fraction_limit(dark, wo, mu, left, np.zeros_like(lobes)), ms.MAX_SCALE)
+
+
+def test_quick_energy_data_train_export_load(tmp_path, monkeypatch):
+    data_dir, weights, held_out = tmp_path / "data", tmp_path / "weights", tmp_path / "held_out.npz"
+    assert energy_train.main(["--quick", "--validation-set", str(held_out), "--workers", "1"]) == 0
+    args = ["--quick", "--data", str(data_dir), "--out", str(weights), "--validation", str(held_out), "--workers", "1",
+            "--threads", "1"]
+    assert energy_train.main(args) == 0
+    chunks = sorted(data_dir.rglob("chunk*.npz"))
+    assert len(chunks) == 4
+    stamps = [c.stat().st_mtime_ns for c in chunks]
+    assert energy_train.main(args + ["--layers", "1"]) == 0
+    assert [c.stat().st_mtime_ns for c in chunks] == stamps  # resumes: nothing made again
+    data = energy_train.load(data_dir, 1)
+    total = data["unscattered"] + data["single"] + data["multiple"]  # every path leaves once, with weight <= 1
+    assert np.all(total <= 1.0 + 1e-9) and np.all(data["multiple"] >= 0) and data["multiple"].max() > 0
+    monkeypatch.setattr(ms, "WEIGHTS", weights)
+    mlp.load.cache_clear()
+    for n_layers in (1, 2):
+        m = ms.energy_network(n_layers).manifest
+        assert m["layers"] == n_layers and m["training_configs"] > 0 and "held_out_validation" in m
+    mlp.load.cache_clear()
+
+
+@pytest.mark.parametrize("n_layers", [1, 2])
+def test_shipped_energy_networks_meet_their_recorded_held_out_error(n_layers):
+    net = ms.energy_network(n_layers)
+    recorded = net.manifest["held_out_validation"]
+    scores = validation.energy_errors(energy_train.VALIDATION_SET, n_layers)
+    assert scores["configs"] == recorded["configs"]
+    for key in ("mean_relative_energy_error", "worst_relative_energy_error"):
+        assert scores[key] == pytest.approx(recorded[key], rel=1e-3), key
+    for key in ("training_configs", "paths_per_wi", "dataset_seed", "date", "code_version",
+                "split_validation"):
+        assert key in net.manifest, key
+    assert ms.energy_weights_path(n_layers).stat().st_size < 400_000
+    json.dumps(net.manifest)
