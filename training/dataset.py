@@ -153,23 +153,31 @@ def shard_inputs(n_layers: int, index: int, size: Size, base_seed: int):
     return rows, wi, wo, rng.integers(0, 2**31, size.shard)
 
 
-def make_shard(job) -> str:
-    out, n_layers, index, size, base_seed = job
-    path = shard_path(out, n_layers, index)
+def write_once(path: Path, make) -> str:
+    """Write the arrays of ``make()`` (arrays dict, meta dict) to ``path`` atomically unless it is there; the meta gets
+    the seconds it took. Returns the file's name, with "(cached)" where it was there."""
     if path.exists():
         return f"{path.name} (cached)"
     start = time.perf_counter()
-    rows, wi, wo, walk_seeds = shard_inputs(n_layers, index, size, base_seed)
-    results = [simulate(rows[c], wi[c], wo[c], size, int(walk_seeds[c])) for c in range(size.shard)]
-    ms, diff, ss = (np.stack([r[i] for r in results]).astype(np.float32) for i in range(3))
-    meta = {"version": VERSION, "seed": base_seed, "layers": n_layers, "shard": index, **asdict(size),
-            "seconds": round(time.perf_counter() - start, 1)}
+    arrays, meta = make()
+    meta["seconds"] = round(time.perf_counter() - start, 1)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as f:
-            np.savez_compressed(f, rows=rows, wi=wi, wo=wo, ms=ms, ms_half_diff=diff, ss=ss,
-                                meta=np.array(json.dumps(meta)))
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, meta=np.array(json.dumps(meta)), **arrays)
     return path.name
+
+
+def make_shard(job) -> str:
+    out, n_layers, index, size, base_seed = job
+
+    def make():
+        rows, wi, wo, walk_seeds = shard_inputs(n_layers, index, size, base_seed)
+        results = [simulate(rows[c], wi[c], wo[c], size, int(walk_seeds[c])) for c in range(size.shard)]
+        ms, diff, ss = (np.stack([r[i] for r in results]).astype(np.float32) for i in range(3))
+        return ({"rows": rows, "wi": wi, "wo": wo, "ms": ms, "ms_half_diff": diff, "ss": ss},
+                {"version": VERSION, "seed": base_seed, "layers": n_layers, "shard": index, **asdict(size)})
+
+    return write_once(shard_path(out, n_layers, index), make)
 
 
 def load(out: Path, n_layers: int) -> dict:

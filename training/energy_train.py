@@ -45,7 +45,7 @@ from addon.bake import spongecake as ms
 from addon.bake.exr import atomic_path
 from addon.reference import spongecake as reference
 from training import dataset
-from training.train import code_version
+from training.train import code_version, cosine_step
 
 VERSION = 1
 DEFAULT_CACHE = dataset.DEFAULT_CACHE.parent / "spongecake-ms-energy"
@@ -100,18 +100,14 @@ def chunk_path(out: Path, n_layers: int, index: int) -> Path:
 
 def make_chunk(job) -> str:
     out, n_layers, index, size, base_seed = job
-    path = chunk_path(out, n_layers, index)
-    if path.exists():
-        return f"{path.name} (cached)"
-    start = time.time()
-    rows, wi, seeds = chunk_inputs(n_layers, index, size, base_seed)
-    tallies = walk(rows, wi, size, seeds)
-    meta = {"version": VERSION, "seed": base_seed, "layers": n_layers, "chunk": size.chunk, "n_wi": size.n_wi,
-            "paths": size.paths, "max_depth": size.max_depth, "seconds": round(time.time() - start, 1)}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        np.savez(f, rows=rows, wi=wi, meta=np.array(json.dumps(meta)), **tallies)
-    return f"{path.name}  {meta['seconds']} s"
+
+    def make():
+        rows, wi, seeds = chunk_inputs(n_layers, index, size, base_seed)
+        return ({"rows": rows, "wi": wi, **walk(rows, wi, size, seeds)},
+                {"version": VERSION, "seed": base_seed, "layers": n_layers, "chunk": size.chunk, "n_wi": size.n_wi,
+                 "paths": size.paths, "max_depth": size.max_depth})
+
+    return dataset.write_once(chunk_path(out, n_layers, index), make)
 
 
 def generate(out: Path, layer_counts, configs, size: Size, seed: int = 1, workers: int = 2, log=print) -> None:
@@ -122,7 +118,7 @@ def generate(out: Path, layer_counts, configs, size: Size, seed: int = 1, worker
     with Pool(max(1, workers)) as pool:
         for k, line in enumerate(pool.imap(make_chunk, jobs)):
             if not line.endswith("(cached)"):
-                log(f"  [{k + 1}/{len(jobs)}] {line}  ({time.time() - start:.0f} s)", flush=True)
+                log(f"  [{k + 1}/{len(jobs)}] {line}  {time.time() - start:.0f} s", flush=True)
 
 
 def load(out: Path, n_layers: int) -> dict:
@@ -214,15 +210,10 @@ def train(samples: dict, n_layers: int, minutes: float, seed: int = 0, log=print
     best = (math.inf, None, 0)
     budget = minutes * 60.0
     while time.time() - start < budget:
-        frac = min(1.0, (time.time() - start) / budget)
-        for group in opt.param_groups:
-            group["lr"] = LEARNING_RATE * 0.5 * (1.0 + math.cos(math.pi * frac)) + 1e-5
         idx = train_idx[torch.randint(len(train_idx), (BATCH,), generator=generator)]
         q = torch.sigmoid(net(rotated(x[idx], n_layers, generator))[:, 0])
         loss = ((q * left[idx] - energy[idx]).abs() / norm[idx]).mean()
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
+        cosine_step(opt, loss, LEARNING_RATE, (time.time() - start) / budget)
         step += 1
         if time.time() - last_check > min(5.0, budget / 20):
             last_check = time.time()

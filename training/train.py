@@ -200,6 +200,16 @@ def lobe_errors(net, data: dict) -> dict:
 
 # ------------------------------------------------------------------------------------------- training
 
+def cosine_step(opt, loss, base_rate: float, frac: float) -> None:
+    """One optimiser step on ``loss`` at the learning rate of cosine decay from ``base_rate``, ``frac`` of the way
+    through the time budget (to 1e-5 at its end)."""
+    for group in opt.param_groups:
+        group["lr"] = base_rate * 0.5 * (1.0 + math.cos(math.pi * min(1.0, frac))) + 1e-5
+    opt.zero_grad()
+    loss.backward()
+    opt.step()
+
+
 def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int = 32, init: mlp.MLP | None = None,
           log=print):
     """Train for ``minutes``, from ``make_network``'s start or, with ``init``, from an exported network
@@ -221,13 +231,8 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
         epoch += 1
         shuffled = rng.permutation(train_idx)
         for i in range(0, len(shuffled), batch):
-            frac = min(1.0, (time.time() - start) / budget)
-            for group in opt.param_groups:
-                group["lr"] = LEARNING_RATE * 0.5 * (1.0 + math.cos(math.pi * frac)) + 1e-5
             loss = lobe_loss(net, data, shuffled[i:i + batch], rng)
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
+            cosine_step(opt, loss, LEARNING_RATE, (time.time() - start) / budget)
             step += 1
         if time.time() - last_check > min(5.0, budget / 20):
             last_check = time.time()
