@@ -69,6 +69,7 @@ class Size:
 QUICK = Size(configs=8, chunk=4, n_wi=4, paths=200)
 VALIDATION = Size(configs=32, chunk=32, n_wi=16, paths=16000)
 VALIDATION_SEED = 1001
+TALLIES = ("unscattered", "single", "multiple")  # the walk's: ``validation.ENERGY_ARRAYS`` after rows and wi
 
 
 # ------------------------------------------------------------------------------------------------ data
@@ -76,12 +77,12 @@ VALIDATION_SEED = 1001
 def walk(rows: np.ndarray, wi: np.ndarray, size: Size, seeds) -> dict:
     """The walk's tallies (C, n_wi, 3) for light from each wi: ``unscattered``, ``single`` (order 1) and
     ``multiple`` (orders ≥ 2) (``reference.spongecake.ground_truth_albedo``)."""
-    out = {k: np.empty(wi.shape[:2] + (3,)) for k in ("unscattered", "single", "multiple")}
+    out = {k: np.empty(wi.shape[:2] + (3,)) for k in TALLIES}
     for c, stack in enumerate(rows):
         params = layer_rows.params_from_rows(stack)
         tallies = reference.ground_truth_albedo(params, wi[c], n_paths=size.paths, seed=int(seeds[c]),
                                                 max_depth=size.max_depth)
-        for key, tally in zip(("unscattered", "single", "multiple"), tallies):
+        for key, tally in zip(TALLIES, tallies):
             out[key][c] = tally
     return out
 
@@ -127,7 +128,7 @@ def load(out: Path, n_layers: int) -> dict:
     if not files:
         raise FileNotFoundError(f"no {n_layers}-layer energy chunks in {out}")
     parts = [dict(np.load(f)) for f in files]
-    data = {k: np.concatenate([p[k] for p in parts]) for k in ("rows", "wi", "unscattered", "single", "multiple")}
+    data = {k: np.concatenate([p[k] for p in parts]) for k in validation.ENERGY_ARRAYS}
     data["meta"] = [json.loads(str(p["meta"])) for p in parts]
     return data
 
@@ -140,7 +141,7 @@ def write_validation_set(path: Path, layer_counts=(1, 2), size: Size = VALIDATIO
             rows, wi, seeds = chunk_inputs(n_layers, 0, size, VALIDATION_SEED)
             parts = pool.starmap(walk, [(rows[k:k + 1], wi[k:k + 1], size, seeds[k:k + 1]) for k in range(len(rows))])
             arrays.update({f"layers{n_layers}_rows": rows, f"layers{n_layers}_wi": wi})
-            for key in ("unscattered", "single", "multiple"):
+            for key in TALLIES:
                 arrays[f"layers{n_layers}_{key}"] = np.concatenate([p[key] for p in parts])
     meta = {"version": VERSION, "seed": VALIDATION_SEED, "configs": size.configs, "n_wi": size.n_wi,
             "paths": size.paths, "max_depth": size.max_depth}
