@@ -495,7 +495,7 @@ def energy_grid(params: model.Params, left_of, lobes_of, mu, phi, side: float = 
 
     left, lobes = albedos(params)
     limit, whiteness = 1.0, whiteness_of(params)
-    if params.substrate is None:
+    if params.substrate is None and len(params.layers) <= NETWORK_LAYERS:
         limit = fraction_limit(params, wo, mu, left, lobes)
     elif model.conserving(params) and whiteness.max() > NEGLIGIBLE_WHITENESS:
         if np.all(whiteness == 1.0):  # already white: the white stack is this one
@@ -513,7 +513,8 @@ MAX_SCALE = 20.0  # the most the energy fraction may scale the network's lobes b
 
 
 def fraction_limit(params: model.Params, wo, mu, left, lobes) -> np.ndarray:
-    """The energy scale's limit (len(wo), 3) for a stack without a substrate: q left / E, the scale that gives the
+    """The energy scale's limit (len(wo), 3) for a stack of 1 or 2 layers without a substrate (deeper stacks lumped
+    into two layers were measured worse with it than without, docs/training.md): q left / E, the scale that gives the
     lobes the energy fraction q (``energy_fraction``) of what single scattering and the Dirac leave, at most
     ``MAX_SCALE``; q moves to 1 for stacks that conserve energy once white, by their whiteness
     (``FRACTION_WHITENESS_POWER``), so that a white stack returns exactly what it receives less the margin."""

@@ -127,3 +127,23 @@ def test_shipped_energy_networks_meet_their_recorded_held_out_error(n_layers):
         assert key in net.manifest, key
     assert ms.energy_weights_path(n_layers).stat().st_size < 400_000
     json.dumps(net.manifest)
+
+
+def test_only_stacks_of_one_or_two_layers_without_a_substrate_take_the_fraction(monkeypatch):
+    """Deeper stacks (lumped, measured worse) and stacks over a substrate (no data) keep the lobes' own energy."""
+    asked = []
+    monkeypatch.setattr(ms, "energy_fraction",
+                        lambda params, w, net=None: asked.append(params) or np.full((len(w), 3), 0.5))
+    mu = np.asarray(model.energy_cosines())
+
+    def constant(value):
+        return lambda stack, wo: np.full((len(wo), 3), value)
+
+    layer = {"albedo": [0.3, 0.3, 0.3], "thickness": 1.0}  # far from white: no white limit
+    for layers, substrate, used in ((1, None, True), (2, None, True), (3, None, False), (4, None, False),
+                                    (1, {"type": "diffuse"}, False)):
+        p = ref.params_from_dict({"layers": [layer] * layers, **({"substrate": substrate} if substrate else {})})
+        asked.clear()
+        scale = ms.energy_grid(p, constant(0.4), constant(0.1), mu, np.zeros(1))
+        assert bool(asked) == used, (layers, substrate)
+        np.testing.assert_allclose(scale, 0.5 * 0.4 / 0.1 if used else 1.0)
