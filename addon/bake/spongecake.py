@@ -71,7 +71,7 @@ MS_VERSION = 10  # what a bake holds: 2 adds the energy scale (the ``MS Energy``
 # 6 its view tables made safe along the view cosine too (``budget_rows``), 7 the forward lobe (``decode``), 8 each
 # form's budget on its own prediction (the node group's merged fiber lobes: ``nodes.spongecake._FiberLobes``), 9 one
 # ``MS Energy`` input fed from a view table for every stack (``nodes.spongecake.budget_table``), 10 the energy
-# fraction's network for stacks without a substrate (``energy_fraction``)
+# fraction's network for stacks of 1 or 2 layers without a substrate (``energy_fraction``)
 NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 
@@ -91,16 +91,19 @@ def energy_weights_path(n_layers: int) -> Path:
 
 
 def energy_network(n_layers: int) -> mlp.MLP:
-    """The network that predicts the energy fraction (``energy_fraction``) of stacks of ``n_layers`` (deeper ones:
-    the two-layer network on the lumped stack)."""
-    return mlp.load(energy_weights_path(min(n_layers, NETWORK_LAYERS)))
+    """The network that predicts the energy fraction (``energy_fraction``) of stacks of ``n_layers`` (1 or 2; deeper
+    stacks keep the lobes' own energy: ``energy_grid``)."""
+    if not 1 <= n_layers <= NETWORK_LAYERS:
+        raise ValueError(f"energy fraction networks are trained for 1 to {NETWORK_LAYERS} layers, got {n_layers}")
+    return mlp.load(energy_weights_path(n_layers))
 
 
 def ms_identity(n_layers: int) -> list:
     """What a stack's multiple scattering comes from: the manifests of the networks that predict it (lobes and
     energy fraction) and the version of what is made from the prediction (``MS_VERSION``, e.g. the energy scale);
     part of bake keys and fit keys."""
-    return [network(n_layers).manifest, energy_network(n_layers).manifest, MS_VERSION]
+    fraction = [energy_network(n_layers).manifest] if n_layers <= NETWORK_LAYERS else []
+    return [network(n_layers).manifest, *fraction, MS_VERSION]
 
 
 # ------------------------------------------------------------------------------------------- encoding
@@ -328,13 +331,11 @@ def energy_inputs(rows: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 
 def fraction_rows(rows: np.ndarray, w: np.ndarray, net: mlp.MLP | None = None) -> np.ndarray:
-    """The energy fraction (N, 3) of stacks (N, L, ROW) seen along w (N, 3) from above: the share of what single
+    """The energy fraction (N, 3) of stacks (N, L ≤ 2, ROW) seen along w (N, 3) from above: the share of what single
     scattering and the Dirac leave that multiple scattering returns (``energy_fraction``); the shipped network for L
-    layers, or ``net``; more than ``NETWORK_LAYERS`` layers lumped (``lumped_rows``)."""
+    layers, or ``net``."""
     rows = np.asarray(rows, dtype=np.float64)
     net = net or energy_network(rows.shape[1])
-    if rows.shape[1] > NETWORK_LAYERS:
-        rows = lumped_rows(rows)[0]
     x = energy_inputs(rows, w)
     raw = net(x.reshape(-1, x.shape[-1])).reshape(len(rows), 3)
     return 1.0 / (1.0 + np.exp(-np.clip(raw, -60.0, 60.0)))
