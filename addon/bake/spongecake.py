@@ -66,12 +66,11 @@ ALPHA_RANGE = (0.01, 1.0)
 G_MAX = 0.95
 THICKNESS_IN = (0.01, 10.0)
 THICKNESS_OUT = (0.01, 20.0)
-MS_VERSION = 10  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
+MS_VERSION = 9  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
 # stack's scale over the view's azimuth too (``nodes.spongecake.view_inputs``), 5 the energy budget (``energy_budget``),
 # 6 its view tables made safe along the view cosine too (``budget_rows``), 7 the forward lobe (``decode``), 8 each
 # form's budget on its own prediction (the node group's merged fiber lobes: ``nodes.spongecake._FiberLobes``), 9 one
-# ``MS Energy`` input fed from a view table for every stack (``nodes.spongecake.budget_table``), 10 the energy
-# fraction's network for stacks of 1 or 2 layers without a substrate (``energy_fraction``)
+# ``MS Energy`` input fed from a view table for every stack (``nodes.spongecake.budget_table``)
 NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 
@@ -91,19 +90,18 @@ def energy_weights_path(n_layers: int) -> Path:
 
 
 def energy_network(n_layers: int) -> mlp.MLP:
-    """The network that predicts the energy fraction (``energy_fraction``) of stacks of ``n_layers`` (1 or 2; deeper
-    stacks keep the lobes' own energy: ``energy_grid``)."""
+    """The network that predicts the energy fraction (``energy_fraction``) of stacks of ``n_layers`` (1 or 2). Shipped
+    and measured (docs/training.md, *The energy fraction network*); the energy scale does not use it yet: a
+    texture-driven bake keeps one energy table per material, which the fraction would make wrong per texel."""
     if not 1 <= n_layers <= NETWORK_LAYERS:
         raise ValueError(f"energy fraction networks are trained for 1 to {NETWORK_LAYERS} layers, got {n_layers}")
     return mlp.load(energy_weights_path(n_layers))
 
 
 def ms_identity(n_layers: int) -> list:
-    """What a stack's multiple scattering comes from: the manifests of the networks that predict it (lobes and
-    energy fraction) and the version of what is made from the prediction (``MS_VERSION``, e.g. the energy scale);
-    part of bake keys and fit keys."""
-    fraction = [energy_network(n_layers).manifest] if n_layers <= NETWORK_LAYERS else []
-    return [network(n_layers).manifest, *fraction, MS_VERSION]
+    """What a stack's multiple scattering comes from: the manifest of the network that predicts it and the version
+    of what is made from the prediction (``MS_VERSION``, e.g. the energy scale); part of bake keys and fit keys."""
+    return [network(n_layers).manifest, MS_VERSION]
 
 
 # ------------------------------------------------------------------------------------------- encoding
@@ -387,14 +385,14 @@ def energy_budget(left, lobes, limit=1.0):
 WHITENESS_POWER = 16  # the whiteness of a stack: its smallest albedo to this power (``whiteness_of``)
 
 
-def whiteness_of(params: model.Params, power: int = WHITENESS_POWER) -> np.ndarray:
+def whiteness_of(params: model.Params) -> np.ndarray:
     """(3,) how close a stack is to white, per channel: its smallest albedo (layers and a diffuse substrate) to the
-    ``power`` (``WHITENESS_POWER``: 1 for white, 0.44 at 0.95, 0.03 at 0.8): light scattered many times has met the
+    power ``WHITENESS_POWER`` (1 for white, 0.44 at 0.95, 0.03 at 0.8): light scattered many times has met the
     darkest scatterer."""
     albedos = [layer.albedo for layer in params.layers]
     if params.substrate is not None and params.substrate.type == "diffuse":
         albedos.append(params.substrate.albedo)
-    return np.min(np.asarray(albedos, dtype=np.float64), axis=0) ** power
+    return np.min(np.asarray(albedos, dtype=np.float64), axis=0) ** WHITENESS_POWER
 
 
 def budget_rows(params: model.Params, left_of, lobes_of, rows: int, phi, substeps: int,
@@ -496,35 +494,12 @@ def energy_grid(params: model.Params, left_of, lobes_of, mu, phi, side: float = 
 
     left, lobes = albedos(params)
     limit, whiteness = 1.0, whiteness_of(params)
-    if params.substrate is None and len(params.layers) <= NETWORK_LAYERS:
-        limit = fraction_limit(params, wo, mu, left, lobes)
-    elif model.conserving(params) and whiteness.max() > NEGLIGIBLE_WHITENESS:
+    if model.conserving(params) and whiteness.max() > NEGLIGIBLE_WHITENESS:
         if np.all(whiteness == 1.0):  # already white: the white stack is this one
             limit = white_limit(left, lobes, whiteness)
         else:
             limit = white_limit(*albedos(model.white(params)), whiteness)
     return scale_of(left, lobes, limit).reshape(len(mu), len(phi), 3)
-
-
-# A white stack's energy fraction is 1 (what single scattering leaves, multiple scattering returns); within the
-# network's error of it for stacks close to white: their fraction moves to 1 by their smallest albedo to this power
-# (0.77 at 0.999, 0.08 at 0.99).
-FRACTION_WHITENESS_POWER = 256
-MAX_SCALE = 20.0  # the most the energy fraction may scale the network's lobes by (their own energy is then tiny)
-
-
-def fraction_limit(params: model.Params, wo, mu, left, lobes) -> np.ndarray:
-    """The energy scale's limit (len(wo), 3) for a stack of 1 or 2 layers without a substrate (deeper stacks lumped
-    into two layers were measured worse with it than without, docs/training.md): q left / E, the scale that gives the
-    lobes the energy fraction q (``energy_fraction``) of what single scattering and the Dirac leave, at most
-    ``MAX_SCALE``; q moves to 1 for stacks that conserve energy once white, by their whiteness
-    (``FRACTION_WHITENESS_POWER``), so that a white stack returns exactly what it receives less the margin."""
-    fraction = _normal_view_averaged(energy_fraction(params, wo), mu)
-    if model.conserving(params):
-        white = whiteness_of(params, FRACTION_WHITENESS_POWER)
-        fraction = white + (1.0 - white) * fraction
-    target = fraction * np.maximum(left, 0.0)
-    return np.minimum(np.divide(target, lobes, out=np.full_like(target, MAX_SCALE), where=lobes > 1e-9), MAX_SCALE)
 
 
 def _normal_view_averaged(albedo, mu):
