@@ -45,7 +45,7 @@ from addon.bake import spongecake as ms
 from addon.bake.exr import atomic_path
 from addon.reference import spongecake as reference
 from training import dataset
-from training.train import code_version, cosine_step
+from training.train import code_version, cosine_step, to_mlp
 
 VERSION = 1
 DEFAULT_CACHE = dataset.DEFAULT_CACHE.parent / "spongecake-ms-energy"
@@ -228,12 +228,6 @@ def train(samples: dict, n_layers: int, minutes: float, seed: int = 0, log=print
     net.load_state_dict(best[1])
     return net, {"steps": step, "best_step": best[2], "seconds": round(time.time() - start, 1),
                  "train_configs": int(n_configs - len(val_configs)), "is_val": is_val}
-
-
-def to_mlp(net: torch.nn.Sequential, manifest: dict) -> mlp.MLP:
-    linears = [m for m in net if isinstance(m, torch.nn.Linear)]
-    return mlp.MLP(tuple(m.weight.detach().double().numpy().T.copy() for m in linears),
-                   tuple(m.bias.detach().double().numpy().copy() for m in linears), manifest)
 
 
 def export(net, info: dict, samples: dict, data: dict, n_layers: int, out: Path, held_out: Path | None,
