@@ -45,7 +45,7 @@ from addon.bake import spongecake as ms
 from addon.bake.exr import atomic_path
 from addon.reference import spongecake as reference
 from training import dataset
-from training.train import code_version, cosine_step, to_mlp
+from training.train import code_version, cosine_step, silu_mlp, to_mlp
 
 VERSION = 1
 DEFAULT_CACHE = dataset.DEFAULT_CACHE.parent / "spongecake-ms-energy"
@@ -161,16 +161,10 @@ def samples_of(data: dict) -> dict:
 def make_network(n_inputs: int, start: float = 0.5) -> torch.nn.Sequential:
     """The MLP, its output starting near q = ``start`` everywhere (the data's mean share: a start far above it
     pushes the sigmoid into saturation, where training stalls)."""
-    sizes = (n_inputs, *HIDDEN, 1)
-    modules = []
-    for i in range(len(sizes) - 1):
-        modules.append(torch.nn.Linear(sizes[i], sizes[i + 1]))
-        if i + 2 < len(sizes):
-            modules.append(torch.nn.SiLU())
+    net = silu_mlp((n_inputs, *HIDDEN, 1))
     with torch.no_grad():
-        modules[-1].weight.mul_(0.1)
-        modules[-1].bias.fill_(math.log(start / (1.0 - start)))
-    return torch.nn.Sequential(*modules)
+        net[-1].bias.fill_(math.log(start / (1.0 - start)))
+    return net
 
 
 def rotated(x: torch.Tensor, n_layers: int, generator: torch.Generator) -> torch.Tensor:

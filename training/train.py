@@ -75,20 +75,27 @@ def outputs(n_layers: int) -> int:
     return n_layers * ms.OUTPUTS + ms.WEIGHT_OUTPUTS + ms.FORWARD_OUTPUTS
 
 
-def make_network(n_layers: int) -> torch.nn.Sequential:
-    sizes = (n_layers * ms.FEATURES, *HIDDEN, outputs(n_layers))
+def silu_mlp(sizes) -> torch.nn.Sequential:
+    """Linear layers of ``sizes`` with SiLU between them, the last one's weights scaled by 0.1 (outputs start near
+    its bias, which the caller sets): both trainers' networks (this one and ``training.energy_train``)."""
     modules = []
     for i in range(len(sizes) - 1):
         modules.append(torch.nn.Linear(sizes[i], sizes[i + 1]))
         if i + 2 < len(sizes):
             modules.append(torch.nn.SiLU())
-    last = modules[-1]
     with torch.no_grad():
-        last.weight.mul_(0.1)
+        modules[-1].weight.mul_(0.1)
+    return torch.nn.Sequential(*modules)
+
+
+def make_network(n_layers: int) -> torch.nn.Sequential:
+    net = silu_mlp((n_layers * ms.FEATURES, *HIDDEN, outputs(n_layers)))
+    last = net[-1]
+    with torch.no_grad():
         last.bias.zero_()
         last.bias[-ms.WEIGHT_OUTPUTS - ms.FORWARD_OUTPUTS:] = -5.0  # start with small lobes
         last.bias[-ms.FORWARD_OUTPUTS:] = torch.tensor(FORWARD_START)
-    return torch.nn.Sequential(*modules).double().to(DEVICE)
+    return net.double().to(DEVICE)
 
 
 def warm_start(net: torch.nn.Sequential, shipped: mlp.MLP) -> None:
