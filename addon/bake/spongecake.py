@@ -66,11 +66,13 @@ ALPHA_RANGE = (0.01, 1.0)
 G_MAX = 0.95
 THICKNESS_IN = (0.01, 10.0)
 THICKNESS_OUT = (0.01, 20.0)
-MS_VERSION = 9  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
+MS_VERSION = 10  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
 # stack's scale over the view's azimuth too (``nodes.spongecake.view_inputs``), 5 the energy budget (``energy_budget``),
 # 6 its view tables made safe along the view cosine too (``budget_rows``), 7 the forward lobe (``decode``), 8 each
 # form's budget on its own prediction (the node group's merged fiber lobes: ``nodes.spongecake._FiberLobes``), 9 one
-# ``MS Energy`` input fed from a view table for every stack (``nodes.spongecake.budget_table``)
+# ``MS Energy`` input fed from a view table for every stack (``nodes.spongecake.budget_table``), 10 the energy
+# fraction's network for stacks of 1 or 2 layers without a substrate (``energy_fraction``), with budget tables
+# that follow a texture-driven input (``driven_budget_rows``)
 NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 
@@ -90,18 +92,19 @@ def energy_weights_path(n_layers: int) -> Path:
 
 
 def energy_network(n_layers: int) -> mlp.MLP:
-    """The network that predicts the energy fraction (``energy_fraction``) of stacks of ``n_layers`` (1 or 2). Shipped
-    and measured (docs/training.md, *The energy fraction network*); the energy scale does not use it yet: a
-    texture-driven bake keeps one energy table per material, which the fraction would make wrong per texel."""
+    """The network that predicts the energy fraction (``energy_fraction``) of stacks of ``n_layers`` (1 or 2; deeper
+    stacks keep the lobes' own energy: ``energy_grid``)."""
     if not 1 <= n_layers <= NETWORK_LAYERS:
         raise ValueError(f"energy fraction networks are trained for 1 to {NETWORK_LAYERS} layers, got {n_layers}")
     return mlp.load(energy_weights_path(n_layers))
 
 
 def ms_identity(n_layers: int) -> list:
-    """What a stack's multiple scattering comes from: the manifest of the network that predicts it and the version
-    of what is made from the prediction (``MS_VERSION``, e.g. the energy scale); part of bake keys and fit keys."""
-    return [network(n_layers).manifest, MS_VERSION]
+    """What a stack's multiple scattering comes from: the manifests of the networks that predict it (lobes and
+    energy fraction) and the version of what is made from the prediction (``MS_VERSION``, e.g. the energy scale);
+    part of bake keys and fit keys."""
+    fraction = [energy_network(n_layers).manifest] if n_layers <= NETWORK_LAYERS else []
+    return [network(n_layers).manifest, *fraction, MS_VERSION]
 
 
 # ------------------------------------------------------------------------------------------- encoding
@@ -385,18 +388,18 @@ def energy_budget(left, lobes, limit=1.0):
 WHITENESS_POWER = 16  # the whiteness of a stack: its smallest albedo to this power (``whiteness_of``)
 
 
-def whiteness_of(params: model.Params) -> np.ndarray:
+def whiteness_of(params: model.Params, power: int = WHITENESS_POWER) -> np.ndarray:
     """(3,) how close a stack is to white, per channel: its smallest albedo (layers and a diffuse substrate) to the
-    power ``WHITENESS_POWER`` (1 for white, 0.44 at 0.95, 0.03 at 0.8): light scattered many times has met the
+    ``power`` (``WHITENESS_POWER``: 1 for white, 0.44 at 0.95, 0.03 at 0.8): light scattered many times has met the
     darkest scatterer."""
     albedos = [layer.albedo for layer in params.layers]
     if params.substrate is not None and params.substrate.type == "diffuse":
         albedos.append(params.substrate.albedo)
-    return np.min(np.asarray(albedos, dtype=np.float64), axis=0) ** WHITENESS_POWER
+    return np.min(np.asarray(albedos, dtype=np.float64), axis=0) ** power
 
 
 def budget_rows(params: model.Params, left_of, lobes_of, rows: int, phi, substeps: int,
-                phi_substeps: int = 1) -> np.ndarray:
+                phi_substeps: int = 1, fraction: bool = True) -> np.ndarray:
     """The Cycles forms' energy budget (``energy_budget``; rows, len(phi), 3) on the view tables' cosines
     (``models.spongecake.view_table_cosines(rows)``) and the azimuths ``phi`` (uniform over the circle from 0 where
     there are several), interpolated linearly between them and made safe between them (``safe_between``), computed
@@ -405,20 +408,15 @@ def budget_rows(params: model.Params, left_of, lobes_of, rows: int, phi, substep
     (oriented stacks) the budget is as many times finer in the azimuth too, and rows and columns are lowered wherever
     interpolation would return more light than the finer budget by ``SAFE_TOLERANCE`` (``furnace_weights``): a tilted
     closure normal that Cycles bends makes the budget leap within a few degrees, near the normal view as well as near
-    grazing."""
-    fine_mu = np.asarray(model.view_table_cosines((rows - 1) * substeps + 1))
+    grazing. ``fraction``: as ``energy_grid``'s."""
+    fine_mu = _fine_cosines(rows, substeps)
     phi = np.asarray(phi, dtype=np.float64)
     if phi_substeps == 1:
-        return safe_between(energy_grid(params, left_of, lobes_of, fine_mu, phi, scale_of=energy_budget), substeps)
-    weights = []
-
-    def budget_and_weights(left, lobes, limit):
-        budget = energy_budget(left, lobes, limit)
-        weights.append(furnace_weights(budget, left, lobes))
-        return budget
-
+        return safe_between(energy_grid(params, left_of, lobes_of, fine_mu, phi, scale_of=energy_budget,
+                                        fraction=fraction), substeps)
+    budget_and_weights, weights = _recording_furnace_weights()
     fine_phi = np.asarray(model.uniform_azimuths(len(phi) * phi_substeps))
-    fine = energy_grid(params, left_of, lobes_of, fine_mu, fine_phi, scale_of=budget_and_weights)
+    fine = energy_grid(params, left_of, lobes_of, fine_mu, fine_phi, scale_of=budget_and_weights, fraction=fraction)
     weight = weights[0].reshape(fine.shape)
     table = safe_between(fine, substeps, weight)
 
@@ -426,6 +424,40 @@ def budget_rows(params: model.Params, left_of, lobes_of, rows: int, phi, substep
         return np.concatenate([a, a[:, :1]], axis=1).swapaxes(0, 1)
 
     return safe_between(wrapped(table), phi_substeps, wrapped(weight[::substeps])).swapaxes(0, 1)[:, :-1]
+
+
+def driven_budget_rows(stacks: list, left_of, lobes_of, rows: int, substeps: int, value_substeps: int,
+                       fraction: bool = True) -> np.ndarray:
+    """The Cycles forms' energy budget (rows, V, 3) of an isotropic stack one of whose inputs a texture drives:
+    ``stacks`` holds the stack at (V − 1) ``value_substeps`` + 1 values of that input, ascending, and column v is the
+    budget of its (v ``value_substeps``)-th stack as ``budget_rows`` makes it (one azimuth), lowered where linear
+    interpolation between the columns would return more light than a stack between them by ``SAFE_TOLERANCE``
+    (``furnace_weights``, as an oriented stack's azimuth columns), so that a texel between two tabulated values
+    gains no energy either."""
+    fine_mu = _fine_cosines(rows, substeps)
+    budget_and_weights, weights = _recording_furnace_weights()
+    fine = np.concatenate([energy_grid(p, left_of, lobes_of, fine_mu, np.zeros(1), scale_of=budget_and_weights,
+                                       fraction=fraction) for p in stacks], axis=1)
+    table = safe_between(fine, substeps)  # each column's rows, as ``budget_rows``'
+    weight = np.stack(weights, axis=1)[::substeps]
+    return safe_between(table.swapaxes(0, 1), value_substeps, weight.swapaxes(0, 1)).swapaxes(0, 1)
+
+
+def _fine_cosines(rows: int, substeps: int) -> np.ndarray:
+    return np.asarray(model.view_table_cosines((rows - 1) * substeps + 1))
+
+
+def _recording_furnace_weights():
+    """``energy_budget`` as an ``energy_grid`` ``scale_of`` that also records each call's ``furnace_weights``, and
+    the list it records them in."""
+    weights = []
+
+    def budget_and_weights(left, lobes, limit):
+        budget = energy_budget(left, lobes, limit)
+        weights.append(furnace_weights(budget, left, lobes))
+        return budget
+
+    return budget_and_weights, weights
 
 
 def furnace_weights(budget, left, lobes):
@@ -482,10 +514,12 @@ def energy_table(params: model.Params, left_of, lobes_of, side: float = 1.0) -> 
 
 
 def energy_grid(params: model.Params, left_of, lobes_of, mu, phi, side: float = 1.0,
-                scale_of=energy_scale) -> np.ndarray:
+                scale_of=energy_scale, fraction: bool = True) -> np.ndarray:
     """The energy scale (len(mu), len(phi), 3) at the view cosines ``mu`` (increasing; a last 1 is the normal view)
     and azimuths ``phi``: ``scale_of`` (``energy_scale`` or ``energy_budget``) of ``left_of(params, wo)`` and
-    ``lobes_of(params, wo)`` (the reference's or a Cycles form's, (N, 3) each), limited by ``white_limit`` where the
+    ``lobes_of(params, wo)`` (the reference's or a Cycles form's, (N, 3) each), limited by ``fraction_limit`` where
+    the stack takes the energy fraction (``takes_fraction``; unless ``fraction`` is False: a texture-driven material
+    whose budget cannot follow its texels, ``nodes.spongecake.TexelEnergy``), else by ``white_limit`` where the
     stack conserves energy once white. The len(phi) estimates at the normal view, one view, are averaged."""
     wo = spherical(np.repeat(side * mu, len(phi)), np.tile(phi, len(mu)))
 
@@ -494,12 +528,42 @@ def energy_grid(params: model.Params, left_of, lobes_of, mu, phi, side: float = 
 
     left, lobes = albedos(params)
     limit, whiteness = 1.0, whiteness_of(params)
-    if model.conserving(params) and whiteness.max() > NEGLIGIBLE_WHITENESS:
+    if fraction and takes_fraction(params):
+        limit = fraction_limit(params, wo, mu, left, lobes)
+    elif model.conserving(params) and whiteness.max() > NEGLIGIBLE_WHITENESS:
         if np.all(whiteness == 1.0):  # already white: the white stack is this one
             limit = white_limit(left, lobes, whiteness)
         else:
             limit = white_limit(*albedos(model.white(params)), whiteness)
     return scale_of(left, lobes, limit).reshape(len(mu), len(phi), 3)
+
+
+def takes_fraction(params: model.Params) -> bool:
+    """Whether the energy scale follows the energy fraction network: stacks of 1 or 2 layers without a substrate
+    (deeper stacks lumped into two layers were measured worse with it than without, docs/training.md; over a
+    substrate it has no data)."""
+    return params.substrate is None and len(params.layers) <= NETWORK_LAYERS
+
+
+# A white stack's energy fraction is 1 (what single scattering leaves, multiple scattering returns); within the
+# network's error of it for stacks close to white: their fraction moves to 1 by their smallest albedo to this power
+# (0.77 at 0.999, 0.08 at 0.99).
+FRACTION_WHITENESS_POWER = 256
+MAX_SCALE = 20.0  # the most the energy fraction may scale the network's lobes by (their own energy is then tiny)
+
+
+def fraction_limit(params: model.Params, wo, mu, left, lobes) -> np.ndarray:
+    """The energy scale's limit (len(wo), 3) for a stack of 1 or 2 layers without a substrate (deeper stacks lumped
+    into two layers were measured worse with it than without, docs/training.md): q left / E, the scale that gives the
+    lobes the energy fraction q (``energy_fraction``) of what single scattering and the Dirac leave, at most
+    ``MAX_SCALE``; q moves to 1 for stacks that conserve energy once white, by their whiteness
+    (``FRACTION_WHITENESS_POWER``), so that a white stack returns exactly what it receives less the margin."""
+    fraction = _normal_view_averaged(energy_fraction(params, wo), mu)
+    if model.conserving(params):
+        white = whiteness_of(params, FRACTION_WHITENESS_POWER)
+        fraction = white + (1.0 - white) * fraction
+    target = fraction * np.maximum(left, 0.0)
+    return np.minimum(np.divide(target, lobes, out=np.full_like(target, MAX_SCALE), where=lobes > 1e-9), MAX_SCALE)
 
 
 def _normal_view_averaged(albedo, mu):

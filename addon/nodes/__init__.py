@@ -57,11 +57,12 @@ def input_values(model_id: str, p, form: str) -> dict:
     return {**mapping.input_values(p), **baked}
 
 
-def view_inputs(model_id: str, p, form: str) -> dict:
+def view_inputs(model_id: str, p, form: str, texels=None) -> dict:
     """The inputs that ``form``'s shader is fed from a table over the view direction (the mapping's ``view_inputs``:
-    socket name → ``view_table.ViewTable``; ``view_wiring`` links them), none for most mappings."""
+    socket name → ``view_table.ViewTable``; ``view_wiring`` links them), none for most mappings; ``texels``: how the
+    tables follow the texels of a texture-driven material (SpongeCake's ``TexelEnergy``), None for constant inputs."""
     mapping = MAPPINGS[model_id]
-    return mapping.view_inputs(p, form) if hasattr(mapping, "view_inputs") else {}
+    return mapping.view_inputs(p, form, texels) if hasattr(mapping, "view_inputs") else {}
 
 
 def _backend(model_id: str, p, form: str, wo, fit=None):

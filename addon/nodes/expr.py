@@ -65,7 +65,7 @@ class NumpyBackend(NumpyMath):
     # -- inputs and geometry
     def input(self, name: str, kind: str):
         v = self._inputs[name]
-        v = np.asarray(v.at(self.wo) if hasattr(v, "at") else v, dtype=np.float64)
+        v = np.asarray(v.at(self.wo, self._inputs) if hasattr(v, "at") else v, dtype=np.float64)
         if kind == "float":
             return np.broadcast_to(v, (self.n,)).copy()
         return np.broadcast_to(v, (self.n, 3)).copy()

@@ -537,18 +537,50 @@ def bake_constants(mat) -> bool:
         _rebuild(mat, model_id, p, form_of(mat), mapping_of(mat), refit=False)
         return True
     changed = _write_values(node, values)
-    changed = _wire_view_inputs(mat, node, view_inputs(model_id, p, form_of(mat))) or changed
+    changed = _wire_view_inputs(mat, node, view_inputs(model_id, p, form_of(mat), texel_energy(mat))) or changed
     key = ms_key(model_id, p)
     if mat.get(MS_KEY) != key:
         mat[MS_KEY], changed = key, True
     return changed
 
 
+TEXEL_ENERGY_KEY = "lamina_texel_energy"  # how the energy budget follows the texels (``TexelEnergy``), set by a bake
+
+
+def set_texel_energy(mat, texels) -> None:
+    """Record how the material's view tables follow its texels (a ``TexelEnergy`` from its texture bake; None: it has
+    no texture-driven layer)."""
+    if texels is None:
+        mat.pop(TEXEL_ENERGY_KEY, None)
+    else:
+        mat[TEXEL_ENERGY_KEY] = json.dumps(texels.to_json())
+
+
+def texel_energy(mat):
+    """The recorded ``TexelEnergy`` of ``mat``, or None: none recorded, or its axis follows an input that is no
+    longer there or no longer linked (the material's own table then, until the next bake)."""
+    model_id, _ = current_params(mat)
+    if TEXEL_ENERGY_KEY not in mat.keys() or not hasattr(MAPPINGS[model_id], "TexelEnergy"):
+        return None
+    texels = MAPPINGS[model_id].TexelEnergy.from_json(json.loads(mat[TEXEL_ENERGY_KEY]))
+    node = shader_node(mat)
+    if texels.axis is not None:
+        key = socket_key(node, texels.axis.socket)
+        if key not in node.inputs or image_values.linked_from(node.inputs[key]) is None:
+            return None
+    return texels
+
+
 def _wire_view_inputs(mat, node, tables: dict) -> bool:
-    """Feed the node's inputs named in ``tables`` from their view tables (``view_wiring``), remove Lamina's lookups
-    that feed nothing any more (with their images); whether any link changed."""
+    """Feed the node's inputs named in ``tables`` from their view tables (``view_wiring``; a table's axis from what
+    feeds the input it follows), remove Lamina's lookups that feed nothing any more (with their images); whether any
+    link changed."""
     before = {(link.from_node.name, link.to_socket.identifier) for s in node.inputs for link in s.links}
-    idle = view_wiring.wire(node, [(node.inputs[socket_key(node, name)], t) for name, t in tables.items()])
+
+    def follows(table):
+        return node.inputs[socket_key(node, table.axis.socket)] if table.axis else None
+
+    idle = view_wiring.wire(node, [(node.inputs[socket_key(node, name)], t, follows(t)) for name, t in tables.items()])
     remove_nodes(mat, idle)
     return before != {(link.from_node.name, link.to_socket.identifier) for s in node.inputs for link in s.links}
 

@@ -45,7 +45,10 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
   a packed float image of e over asin(√μ) (the view's angle near the normal, √μ near grazing), and over the view's
   azimuth too where a layer is oriented off the normal, looked up bilinearly at the view (``view_inputs``,
   ``view_table``, ``view_wiring``): one texture lookup, where a chain of mixes between knots cost the node group
-  more (docs/training.md). A texture-driven bake keeps the material's own table for every texel. [approx: ms-energy]
+  more (docs/training.md). Where a texture drives one float layer input of an isotropic stack, the table's columns
+  are that input's values instead (``TexelEnergy``: 9 of them over the texels' range, made safe between them) and
+  the lookup takes the texture's value; other texture-driven materials keep one table and leave the energy fraction
+  out of it (each texel then keeps its baked lobes' own energy). [approx: ms-energy]
   In the node group each fiber layer's GGX lobe and the network's lobe for that layer are one Glossy BSDF (colours
   summed, α_x mixed harmonically: ``_FiberLobes``), and its budget is computed on that. [approx: ms-merged-fiber-lobe]
 
@@ -286,7 +289,7 @@ def _ms_sockets(p: model.Params) -> list[Socket]:
 
 
 # The energy budget (``bake.spongecake.energy_budget``) at the view: fed from a table over the view (``view_inputs``),
-# per material, not per texel (a texture-driven bake keeps the material's own).
+# per material, or over the view and a texture-driven input's value (``TexelEnergy``).
 MS_ENERGY = Param("energy", "Energy", "color", (2.0, 2.0, 2.0), 0.0, None,
                   description="Baked energy budget at the view, fed from Lamina's view table (unlinked: its "
                               "least value): the multiple-scattering closures take what exceeds 1 (keeping them "
@@ -367,13 +370,61 @@ def energy_values(p: model.Params, form: str) -> dict:
     return {MS_ENERGY_INPUT: tuple(float(v) for v in budget_table(p, form).values.min(axis=(0, 1)))}
 
 
-def view_inputs(p: model.Params, form: str) -> dict:
+def view_inputs(p: model.Params, form: str, texels: "TexelEnergy | None" = None) -> dict:
     """Inputs that the material feeds from a table over the view (socket name → ``view_table.ViewTable``): with
-    multiple scattering, ``MS Energy`` from ``budget_table``."""
-    return {MS_ENERGY_INPUT: budget_table(p, form)} if p.multiple_scattering else {}
+    multiple scattering, ``MS Energy`` from ``budget_table`` (following the texels as ``texels`` says)."""
+    return {MS_ENERGY_INPUT: budget_table(p, form, texels)} if p.multiple_scattering else {}
 
 
-def budget_table(p: model.Params, form: str):
+@dataclass(frozen=True)
+class TexelEnergy:
+    """How the energy budget of a material whose layer inputs are driven by textures follows its texels (decided by
+    its texture bake: ``texel_energy``). With an ``axis`` (one float layer input of an isotropic stack driven), the
+    budget table has a column per tabulated value of that input and is looked up at the texel's value. Without one
+    (several inputs driven, a colour or an orientation, or an oriented stack, whose table already spends its columns
+    on the azimuth), no table follows the texels: the budget leaves out the energy fraction (``bake.spongecake.
+    energy_grid``), so that each texel keeps the energy its own baked lobes carry, as the network predicts it."""
+    axis: object = None  # a ``view_table.Axis``, or None
+
+    def to_json(self):
+        return {"axis": self.axis and self.axis.to_json()}
+
+    @classmethod
+    def from_json(cls, data) -> "TexelEnergy":
+        from .view_table import Axis
+
+        return cls(data["axis"] and Axis.from_json(data["axis"]))
+
+
+# A texture-driven input's budget is tabulated at this many of its values, computed ``DRIVEN_ENERGY_SUBSTEPS`` times
+# finer (``bake.spongecake.driven_budget_rows``): with the energy fraction, a thickness-driven flake layer's
+# multiple-scattering scale interpolated between 9 values is within 2.8% of the exact one, between 5 within 11%
+# (docs/training.md, *What the ratio per texel needs*).
+DRIVEN_ENERGY_VALUES = 9
+DRIVEN_ENERGY_SUBSTEPS = 2
+# Thickness and flake roughness are tabulated uniformly in log(value + this); an hg layer's g (its roughness input)
+# uniformly in the value.
+DRIVEN_ENERGY_OFFSET = 0.01
+
+
+def texel_energy(p: model.Params, ranges: dict) -> TexelEnergy | None:
+    """How the budget of ``p`` follows its texels (``TexelEnergy``), from the least and greatest value of each driven
+    layer input (``ranges``: (layer index, parameter name) → (least, greatest), clamped to the parameter's range, or
+    None for a colour or a direction: ``bake.textures.float_ranges``); None where no texture drives a layer."""
+    from .view_table import Axis
+
+    if not ranges:
+        return None
+    (layer, name), span = next(iter(ranges.items()))
+    if len(ranges) > 1 or span is None or model.anisotropic(p):
+        return TexelEnergy()
+    lo, hi = span
+    socket = next(s.name for s in sockets(p) if s.layer == layer and s.param.name == name and not s.baked)
+    offset = None if name == "roughness" and p.layers[layer].type == "hg" else DRIVEN_ENERGY_OFFSET
+    return TexelEnergy(Axis.spaced(socket, float(lo), float(hi), DRIVEN_ENERGY_VALUES, offset))
+
+
+def budget_table(p: model.Params, form: str, texels: TexelEnergy | None = None):
     """The energy budget (``bake.spongecake.energy_budget``: 1 + the reference's energy scale, ``reference.
     spongecake.energy_tables``) computed on what ``form`` renders (its numpy prediction): what the form's single
     scattering and Dirac leave, over the albedo of its multiple-scattering closures, so that the rendered furnace
@@ -381,21 +432,28 @@ def budget_table(p: model.Params, form: str):
     single-scattering mapping's error, even where that single scattering alone exceeds 1. A ``view_table.ViewTable``
     on ``model.view_energy_grid``: over the view's angle, and its azimuth where a layer is oriented off the normal (a
     budget per view cosine, the least over the azimuths, would leave the multiple scattering short by up to 70% at
-    other azimuths: docs/training.md). Cached per stack, form and weights folder."""
+    other azimuths: docs/training.md). A texture-driven material's table follows its texels as ``texels`` says
+    (``TexelEnergy``). Cached per stack, form, weights folder and ``texels``."""
     from ..bake import spongecake as bake
 
-    return _budget_table(p, form, str(bake.WEIGHTS))
+    return _budget_table(p, form, str(bake.WEIGHTS), texels)
 
 
 @lru_cache(maxsize=64)
-def _budget_table(p: model.Params, form: str, weights: str):
-    from ..bake.spongecake import budget_rows
+def _budget_table(p: model.Params, form: str, weights: str, texels: TexelEnergy | None):
+    from ..bake.spongecake import budget_rows, driven_budget_rows
     from .view_table import ViewTable
 
     rows, azimuths = model.view_energy_grid(p)
+    left_of, lobes_of = partial(_left, form=form), partial(_ms_furnace, form=form)
+    axis = texels and texels.axis
+    if axis:
+        stacks = [with_values(p, {**input_values(p), axis.socket: v}) for v in axis.finer(DRIVEN_ENERGY_SUBSTEPS)]
+        table = driven_budget_rows(stacks, left_of, lobes_of, rows, VIEW_BUDGET_SUBSTEPS[0], DRIVEN_ENERGY_SUBSTEPS)
+        return ViewTable(table, model.view_table_lowest(), axis)
     substeps = VIEW_BUDGET_SUBSTEPS if azimuths > 1 else VIEW_BUDGET_SUBSTEPS[:1]
-    table = budget_rows(p, partial(_left, form=form), partial(_ms_furnace, form=form), rows,
-                        model.uniform_azimuths(azimuths), *substeps)
+    table = budget_rows(p, left_of, lobes_of, rows, model.uniform_azimuths(azimuths), *substeps,
+                        fraction=texels is None)
     return ViewTable(table, model.view_table_lowest())
 
 

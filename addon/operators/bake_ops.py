@@ -21,6 +21,7 @@ import bpy
 from ..bake import textures
 from ..bake.textures import BakeError
 from ..nodes import material as lamina_material
+from ..nodes import spongecake as mapping
 from ..nodes import texture_wiring
 from . import blend_io
 from .progress import end_modal
@@ -67,20 +68,30 @@ class BakeRun:
         self.warnings: list[str] = []
         self.sources = texture_wiring.sources(mat)
         _, self.params = lamina_material.current_params(mat)
+        self.form = lamina_material.form_of(mat)
         self.folder = folder or cache_folder()
         self.fraction = 0.0
-        self.maps = self.paths = self._steps = None
+        self.maps = self.paths = self._steps = self.texels = None
         self.cache_hit = False
         if not self.sources:
             return  # nothing to bake: finish() writes the constants
         texture_wiring.vector_source(self.sources)  # refuse textures with different mappings before computing
         self.inputs = texture_wiring.read_inputs(self.sources, self.warnings)
+        self.texels = mapping.texel_energy(self.params, textures.float_ranges(self.params, self.inputs))
         self.key = textures.cache_key(self.params, self.inputs)
         self.paths = textures.cached_maps(self.params, self.folder, self.key)
         self.cache_hit = self.paths is not None
-        if not self.cache_hit:
-            labels = {s.key: s.label for s in self.sources}
-            self._steps = textures.bake_steps(self.params, self.inputs, labels, self.warnings)
+        labels = {s.key: s.label for s in self.sources}
+        maps = None if self.cache_hit else textures.bake_steps(self.params, self.inputs, labels, self.warnings)
+        self._steps = self._with_energy_table(maps)
+
+    def _with_energy_table(self, maps):
+        """The maps' steps (none for a cache hit), then one more that computes the energy budget table that follows
+        the texels (``nodes.spongecake.TexelEnergy``: seconds, cached for ``finish``)."""
+        result = (yield from maps) if maps is not None else None
+        yield 1.0
+        mapping.budget_table(self.params, self.form, self.texels)
+        return result
 
     def step(self) -> bool:
         """Compute the next chunk of texels (the first step validates them); False when nothing is left."""
@@ -108,12 +119,14 @@ class BakeRun:
             raise BakeError(f"{mat.name} changed while baking; bake again")
         if not self.sources:
             texture_wiring.unwire(mat)
+            lamina_material.set_texel_energy(mat, None)
             lamina_material.bake_constants(mat)
             return (f"No Image Texture drives a layer input of {mat.name}: nothing to bake; it uses the constant "
                     f"multiple-scattering values")
         if self.paths is None:
             self.paths = textures.write_maps(self.maps, self.folder, self.key)
         texture_wiring.wire(mat, textures.map_layout(self.params), self.paths, self.sources)
+        lamina_material.set_texel_energy(mat, self.texels)
         lamina_material.bake_constants(mat)  # records the bake; every MS input is linked now
         h, w = next(iter(self.inputs.values())).shape[:2]
         return (f"Baked the multiple scattering of {mat.name} at {w} x {h} into {len(self.paths)} maps in "

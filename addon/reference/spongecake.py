@@ -25,8 +25,10 @@ Conventions (local frame, z = macro normal; ``wi`` points to the light, ``wo`` t
   single scattering and the Dirac leave (whether the Dirac is rendered or not), E the directional albedo of the
   network's lobes, m = ``ENERGY_MARGIN`` (0.3%) a margin for the noise of their estimates: single plus multiple
   scattering never return more than they receive.
-  The limit is 1 (the network's energy wherever it fits in), except for stacks that conserve energy once white
-  (``models.spongecake.conserving``: no Fresnel flakes, no substrate or a diffuse one), where it moves towards
+  For 1 or 2 layers without a substrate the limit is q left / E: the energy network's fraction q(ωo) of what is left
+  (``bake.spongecake.energy_fraction``, ``fraction_limit``; q taken to 1 for white stacks that conserve energy).
+  Otherwise it is 1 (the network's energy wherever it fits in), except for stacks that conserve energy once
+  white (``models.spongecake.conserving``: no Fresnel flakes, no substrate or a diffuse one), where it moves towards
   left_white / E_white, the scale that gives the white stack exactly its leftover, by the stack's whiteness
   (``bake.spongecake.whiteness_of``): a white isotropic stack returns what it receives less m at the knots. The
   scale follows the view alone, as a Cycles closure weight does, so the scaled lobes are reciprocal only where it

@@ -1,6 +1,7 @@
 """The whole multiple-scattering pipeline at --quick size, in CI time: Monte Carlo dataset → training → export →
 the add-on loads the exported weights → a texture-driven material is baked → Cycles renders it as predicted."""
 import os
+import shutil
 
 import numpy as np
 import pytest
@@ -28,6 +29,8 @@ def quick_weights(tmp_path, monkeypatch):
     assert dataset.main(["--quick", "--out", str(data), "--workers", "1"]) == 0
     assert train.main(["--quick", "--layers", "1", "--data", str(data), "--out", str(weights),
                        "--validation", str(data), "--threads", "1"]) == 0
+    for n_layers in (1, 2):  # the energy fraction networks are trained apart (training.energy_train)
+        shutil.copy(ms.energy_weights_path(n_layers), weights)
     monkeypatch.setattr(ms, "WEIGHTS", weights)
     mlp.load.cache_clear()
     ms.predict.cache_clear()

@@ -202,8 +202,8 @@ def test_srgb_textures_are_linearised_like_blender():
 
 def _render_halves(param, form, folder, monkeypatch):
     """Cycles' render of a two-valued texture and the prediction of each half: that texel's baked lobes with the
-    material's own energy scale (not baked per texel: its ``MS Energy`` input is fed the Lamina node's own view
-    table)."""
+    material's energy budget table (``MS Energy``), which follows the texture's value where one float input is
+    driven (``nodes.spongecake.TexelEnergy``: looked up at each half's value) and is the material's own otherwise."""
     path, received = _halves(folder, param)
     mat, _ = _material(param, path, form)
     bake_ops.bake(mat)
@@ -211,8 +211,8 @@ def _render_halves(param, form, folder, monkeypatch):
     img, _ = render_cycles(mat, spec, 32, 0, os.path.join(str(folder), f"{form}.exr"))
     halves = texture_halves(spec)
     texel = {"left": (H - 1, 0), "right": (H - 1, W - 1)}
-    views = mapping.view_inputs(material.current_params(mat)[1], form)
-    monkeypatch.setattr(mapping, "view_inputs", lambda p, f: views)
+    views = mapping.view_inputs(material.current_params(mat)[1], form, material.texel_energy(mat))
+    monkeypatch.setattr(mapping, "view_inputs", lambda p, f, texels=None: views)
     predicted = {half: predicted_image(model.ID, _params({param: _texel_value(received, *texel[half])}), form, spec)
                  for half in halves}
     return img, halves, predicted, received
@@ -450,7 +450,8 @@ def test_the_modal_operator_steps_from_the_timer_and_esc_cancels_cleanly(cancel,
         assert reports == [("WARNING", "Bake cancelled: nothing was written or changed")]
         assert _cache_files(saved) == [] and texture_wiring.baked_nodes(mat) == []
     else:
-        assert op.modal(context, _event("TIMER")) == {"FINISHED"}
+        steps = [op.modal(context, _event("TIMER")) for _ in range(2)]  # the last chunk, then the energy table
+        assert steps == [{"RUNNING_MODAL"}, {"FINISHED"}]
         assert reports[-1][0] == "INFO" and "Baked" in reports[-1][1] and texture_wiring.baked_nodes(mat)
     calls = context.window_manager.calls
     assert calls[:3] == ["progress_begin", "event_timer_add", "modal_handler_add"] and "progress_update" in calls

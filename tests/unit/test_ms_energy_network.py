@@ -1,5 +1,5 @@
 """SpongeCake multiple scattering's energy fraction network (issue 15, part 1): numpy inference against torch, the
-quick train → export → load pipeline, the augmentation's symmetry, the side a view picks, and the
+quick train → export → load pipeline, the augmentation's symmetry, the side a view picks, the white limit, and the
 shipped weights against their recorded held-out error."""
 import json
 
@@ -10,6 +10,7 @@ torch = pytest.importorskip("torch")
 
 from addon.bake import layer_rows, mlp, validation  # noqa: E402
 from addon.bake import spongecake as ms  # noqa: E402
+from addon.models import spongecake as model  # noqa: E402
 from addon.reference import spongecake as ref  # noqa: E402
 from training import dataset, energy_train  # noqa: E402
 
@@ -77,6 +78,20 @@ def test_a_view_from_below_takes_the_flipped_stack_seen_from_above():
     assert np.all((q > 0) & (q < 1))
 
 
+def test_a_white_stack_gets_all_that_single_scattering_leaves_and_a_dark_one_the_networks_share():
+    mu = np.asarray(model.energy_cosines())
+    wo = ref.spherical(mu, np.zeros_like(mu))
+    left = np.full((len(mu), 3), 0.4)
+    lobes = np.full((len(mu), 3), 0.1)
+    white = ref.params_from_dict({"layers": [{"albedo": [1.0, 1.0, 1.0], "thickness": 3.0}]})
+    np.testing.assert_allclose(ms.fraction_limit(white, wo, mu, left, lobes), 4.0)
+    dark = ref.params_from_dict({"layers": [{"albedo": [0.5, 0.5, 0.5], "thickness": 3.0}]})
+    q = ms.energy_fraction(dark, wo)
+    np.testing.assert_allclose(ms.fraction_limit(dark, wo, mu, left, lobes)[:-1], 4.0 * q[:-1], rtol=1e-12)
+    assert np.all(q < 0.5)
+    np.testing.assert_allclose(ms.fraction_limit(dark, wo, mu, left, np.zeros_like(lobes)), ms.MAX_SCALE)
+
+
 def test_quick_energy_data_train_export_load(tmp_path, monkeypatch):
     data_dir, weights, held_out = tmp_path / "data", tmp_path / "weights", tmp_path / "held_out.npz"
     assert energy_train.main(["--quick", "--validation-set", str(held_out), "--workers", "1"]) == 0
@@ -112,3 +127,23 @@ def test_shipped_energy_networks_meet_their_recorded_held_out_error(n_layers):
         assert key in net.manifest, key
     assert ms.energy_weights_path(n_layers).stat().st_size < 400_000
     json.dumps(net.manifest)
+
+
+def test_only_stacks_of_one_or_two_layers_without_a_substrate_take_the_fraction(monkeypatch):
+    """Deeper stacks (lumped, measured worse) and stacks over a substrate (no data) keep the lobes' own energy."""
+    asked = []
+    monkeypatch.setattr(ms, "energy_fraction",
+                        lambda params, w, net=None: asked.append(params) or np.full((len(w), 3), 0.5))
+    mu = np.asarray(model.energy_cosines())
+
+    def constant(value):
+        return lambda stack, wo: np.full((len(wo), 3), value)
+
+    layer = {"albedo": [0.3, 0.3, 0.3], "thickness": 1.0}  # far from white: no white limit
+    for layers, substrate, used in ((1, None, True), (2, None, True), (3, None, False), (4, None, False),
+                                    (1, {"type": "diffuse"}, False)):
+        p = ref.params_from_dict({"layers": [layer] * layers, **({"substrate": substrate} if substrate else {})})
+        asked.clear()
+        scale = ms.energy_grid(p, constant(0.4), constant(0.1), mu, np.zeros(1))
+        assert bool(asked) == used, (layers, substrate)
+        np.testing.assert_allclose(scale, 0.5 * 0.4 / 0.1 if used else 1.0)

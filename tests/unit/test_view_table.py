@@ -61,3 +61,37 @@ def test_the_rows_are_dense_near_the_normal_and_near_grazing():
     assert mu[0] == pytest.approx(model.energy_cosines()[0]) and mu[-1] == 1.0 and np.all(np.diff(mu) > 0)
     assert math.degrees(math.acos(mu[-2])) < 4.2 < math.degrees(math.acos(model.energy_cosines(rows)[-2]))
     assert mu[1] - mu[0] < 0.016
+
+
+def test_a_table_over_an_input_looks_up_the_inputs_value_between_its_columns():
+    """An ``Axis`` (a texture-driven input): columns at its values, uniform in log(value + offset); the lookup takes
+    the input's value from the inputs, interpolates linearly in the warped value and holds the end columns beyond."""
+    from addon.nodes.view_table import Axis
+
+    axis = Axis.spaced("L1 Thickness", 0.3, 8.0, 5, offset=0.01)
+    warped = np.log(np.asarray(axis.values) + 0.01)
+    np.testing.assert_allclose(np.diff(warped), np.diff(warped)[0], rtol=1e-9)
+    assert axis.values[0] == 0.3 and axis.values[-1] == 8.0
+    assert len(axis.finer(2)) == 9 and axis.finer(2)[::2] == pytest.approx(axis.values, rel=1e-12)
+    values = np.random.default_rng(3).uniform(0.2, 2.0, (5, 5, 3))
+    t = ViewTable(values, LOWEST, axis)
+    assert t.pixels().shape == (5, 5, 4)  # no wrapping column
+    normal = _views([0.5 * math.pi], [0.0])
+    v = values.astype(np.float32).astype(float)
+    for c, x in enumerate(axis.values):
+        np.testing.assert_allclose(t.at(normal, {axis.socket: x})[0], v[-1, c], rtol=1e-6)
+    between = math.exp(0.5 * (warped[1] + warped[2])) - 0.01
+    np.testing.assert_allclose(t.at(normal, {axis.socket: between})[0], 0.5 * (v[-1, 1] + v[-1, 2]), rtol=1e-6)
+    np.testing.assert_allclose(t.at(normal, {axis.socket: 50.0})[0], v[-1, -1], rtol=1e-6)
+    np.testing.assert_allclose(t.at(normal, {axis.socket: 0.0})[0], v[-1, 0], rtol=1e-6)
+    assert t.name != ViewTable(values, LOWEST).name
+
+
+def test_an_axis_of_one_value_and_a_linear_axis():
+    from addon.nodes.view_table import Axis
+
+    one = Axis.spaced("L1 Roughness", 0.4, 0.4, 9)
+    assert one.values == (0.4,) and one.position(0.9) == 0.0
+    linear = Axis.spaced("L1 Roughness", -0.5, 0.5, 5)
+    assert linear.values == pytest.approx((-0.5, -0.25, 0.0, 0.25, 0.5))
+    assert Axis.from_json(linear.to_json()) == linear
