@@ -176,13 +176,14 @@ def _range(layer: model.Layer, name: str):
     return prm.min, prm.max
 
 
-def float_ranges(p: model.Params, inputs: dict) -> dict:
-    """(layer index, parameter name) → (least, greatest) of each float input's finite texels, clamped to the
-    parameter's range as the bake clamps them (``nodes.spongecake.texel_energy``'s axis spans them)."""
+def input_ranges(p: model.Params, inputs: dict) -> dict:
+    """(layer index, parameter name) → (least, greatest) of each float or colour input's finite texels (over the
+    channels of a colour), clamped to the parameter's range as the bake clamps them (``nodes.spongecake.
+    texel_energy``'s axis spans them); None for a direction."""
     out = {}
     for (k, name), value in inputs.items():
         a = np.asarray(value, dtype=np.float64)
-        if next(q.kind for q in model.LAYER if q.name == name) == "float" and np.isfinite(a).any():
+        if next(q.kind for q in model.LAYER if q.name == name) != "vector" and np.isfinite(a).any():
             a = np.clip(a[np.isfinite(a)], *_range(p.layers[k], name))
             out[k, name] = (float(a.min()), float(a.max()))
         else:

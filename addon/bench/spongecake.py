@@ -530,6 +530,106 @@ def ms_render_times(names, samples: int, resolution: int, repeats: int) -> list[
     return rows
 
 
+# Texture-driven materials whose energy budget follows one input (``nodes.spongecake.TexelEnergy``): label, layers
+# (the Lamina node's values), the driven (layer, parameter) and the texture's range.
+_FLAKES = {"type": "surface", "roughness": 0.3, "thickness": 1.0, "albedo": [0.8] * 3}
+DRIVEN_CASES = (
+    ("surface flakes α 0.3, albedo 0.8; thickness 0.3–8", [_FLAKES], (0, "thickness"), (0.3, 8.0)),
+    ("white surface flakes α 0.3; thickness 0.05–8", [{**_FLAKES, "albedo": [1.0] * 3}], (0, "thickness"),
+     (0.05, 8.0)),
+    ("hg Tρ 2, albedo 0.9; g −0.5–0.8", [{"type": "hg", "roughness": 0.3, "thickness": 2.0, "albedo": [0.9] * 3}],
+     (0, "roughness"), (-0.5, 0.8)),
+    ("surface flakes Tρ 0.5 over hg g 0.5 Tρ 2, albedo 0.9; flake α 0.05–1",
+     [{**_FLAKES, "thickness": 0.5, "albedo": [0.9] * 3},
+      {"type": "hg", "roughness": 0.5, "thickness": 2.0, "albedo": [0.9] * 3}], (0, "roughness"), (0.05, 1.0)),
+    ("surface flakes α 0.3, Tρ 1; albedo 0.2–0.99 (colours)", [_FLAKES], (0, "albedo"), (0.2, 0.99)),
+    ("the same over hg g 0.5 Tρ 2, albedo 0.9; top albedo 0.2–0.99 (colours)",
+     [_FLAKES, {"type": "hg", "roughness": 0.5, "thickness": 2.0, "albedo": [0.9] * 3}], (0, "albedo"), (0.2, 0.99)),
+)
+DRIVEN_SUBSTEPS = 4  # the measured values: the tabulated ones and 3 between each two
+
+
+def driven_energy_rows(form: str) -> list[dict]:
+    """Per ``DRIVEN_CASES`` case: how far the multiple scattering that the ``MS Energy`` table following the texels
+    (looked up at a texel's value) gives is from what the table of the texel's own values as a material would give,
+    against one table for the Lamina node's values (the alternative without ``TexelEnergy``). Per measured value:
+    the multiple scattering's albedo max(e − 1, 0) E(ωo) (E its closures' albedo) at the table's rows, the absolute
+    difference (a share of the light received) and the sum over rows of the difference over the sum of the texel's
+    own; and for non-absorbing stacks the form's white furnace of texels between the tabulated values."""
+    from ..nodes import predicted_furnace
+    from ..nodes.closures_np import SHARP_ALBEDO
+
+    out = []
+    for label, layers, key, span in DRIVEN_CASES:
+        p = model.params_from_dict({"layers": layers, "multiple_scattering": True, "delta_transmission": True})
+        texels = mapping.texel_energy(p, {key: span})
+        table, material = mapping.budget_table(p, form, texels), mapping.budget_table(p, form, mapping.TexelEnergy())
+        rows = np.asarray(model.view_table_cosines(table.shape[0]))
+        wo = reference.spherical(rows, np.zeros_like(rows))
+        socket = texels.axis.socket
+        errors = {"driven": ([], []), "material": ([], [])}
+        for v in _measured_values(texels.axis):
+            texel = mapping.with_values(p, {**mapping.input_values(p), socket: v})
+            lobes = mapping.ms_closure_albedo(texel, wo, form)
+            own = np.maximum(mapping.budget_table(texel, form).at(wo) - 1.0, 0.0) * lobes
+            for name, budget in (("driven", table.at(wo, {socket: v})), ("material", material.at(wo))):
+                difference = np.abs(np.maximum(budget - 1.0, 0.0) * lobes - own)
+                errors[name][0].append(difference.max())
+                errors[name][1].append(difference.sum() / max(own.sum(), 1e-12))
+        row = {"label": label, "form": form, "values": len(texels.axis.values),
+               **{f"{name}_{kind}": np.asarray(e[i]) for name, e in errors.items()
+                  for i, kind in enumerate(("absolute", "relative"))}}
+        if all(layer["albedo"] == [1.0] * 3 for layer in layers):
+            views = reference.spherical(np.cos(np.radians(FURNACE_THETAS)), np.zeros(len(FURNACE_THETAS)))
+            between = texels.axis.finer(2)[1::2]
+            row["furnace"] = np.concatenate([predicted_furnace(
+                MODEL, mapping.with_values(p, {**mapping.input_values(p), socket: texels.axis.value(v)}), form,
+                texels=texels, quadratures=SHARP_ALBEDO)(views) for v in between])
+        out.append(row)
+    return out
+
+
+def _measured_values(axis) -> list:
+    """The axis' values ``DRIVEN_SUBSTEPS`` times finer; for a colour, colours: the i-th holds the i-th, the (i + n/3)-th
+    and the (i + 2n/3)-th of the n values in its channels (each value in each channel once, with others beside it)."""
+    values = axis.finer(DRIVEN_SUBSTEPS)
+    if not axis.channels:
+        return list(values)
+    n = len(values)
+    return [tuple(values[(i + k * n // 3) % n] for k in range(3)) for i in range(n)]
+
+
+def driven_energy_markdown() -> list[str]:
+    lines = ["", "### Texture-driven stacks: the energy budget per texel", "",
+             "Where a texture drives one float layer input of an isotropic stack, the `MS Energy` table has a column "
+             f"per tabulated value of that input ({mapping.DRIVEN_ENERGY_VALUES} over the texture's range, computed "
+             f"{mapping.DRIVEN_ENERGY_SUBSTEPS}× finer and made safe between them; `nodes.spongecake.TexelEnergy`) and "
+             "is looked up at the texel's value. Measured at the tabulated values and "
+             f"{DRIVEN_SUBSTEPS - 1} more between each two: the light the multiple-scattering closures return, "
+             "max(e − 1, 0) times their albedo, at the table's 32 rows, against what the table of the texel's own "
+             "values as a material gives: the largest difference (a share of the light received) and, per value, "
+             "the summed difference over the texel's own sum (relative). An albedo's table is tabulated at greys and "
+             "each channel looked up at its own value; it is measured at colours (each measured value in each "
+             "channel, the others beside it a third and two thirds of the values further), so the error includes "
+             "the lobe network's coupling of the channels. Beside it, what such a material renders without the "
+             "columns (several inputs driven, an orientation, an oriented stack): one table for the Lamina node's "
+             "values, without the energy fraction (each texel keeps its lobes' own energy).", "",
+             "| texture-driven stack | form | values | per-texel table: largest difference | relative, mean | "
+             "worst | one table: largest difference | relative, mean | worst | "
+             "white furnace between the values: mean \\|1 − a\\| | largest a |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for form in ("osl", "nodes"):
+        for r in driven_energy_rows(form):
+            furnace = r.get("furnace")
+            white = (f"{pct(np.mean(np.abs(1.0 - furnace)))} | {furnace.max():.4f}" if furnace is not None
+                     else "not applicable | not applicable")
+            cells = [f"{r[f'{name}_absolute'].max():.4f} | {pct(r[f'{name}_relative'].mean())} | "
+                     f"{pct(r[f'{name}_relative'].max())}" for name in ("driven", "material")]
+            lines.append(f"| {r['label']} | {'OSL' if form == 'osl' else 'node group'} | {r['values']} | "
+                         f"{' | '.join(cells)} | {white} |")
+    return lines
+
+
 def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
     from ..bake import validation
 
@@ -656,6 +756,7 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               + "; ".join(f"{label} mean |1 − a| {pct(np.mean(np.abs(1.0 - a)))}, worst {pct(np.max(np.abs(1.0 - a)))}, "
                           f"largest {a.max():.4f}, above {goal_max:g} in {pct(np.mean(a > goal_max))} of the cases"
                           for label, a in (("OSL", dense["osl"]), ("node group", dense["nodes"]))) + "."]
+    lines += driven_energy_markdown()
     # --- rendered
     from ..reference.spongecake_truth import TruthSettings
 

@@ -40,13 +40,14 @@ def principled_models() -> list[str]:
     return [m for m in MAPPINGS if principled_counterpart(m) is not None]
 
 
-def numpy_backend(model_id: str, p, form: str, wo):
-    """A ``NumpyBackend`` for ``p`` at the views ``wo``, no closures yet."""
+def numpy_backend(model_id: str, p, form: str, wo, texels=None):
+    """A ``NumpyBackend`` for ``p`` at the views ``wo``, no closures yet; ``texels``: as ``view_inputs``' (``p`` is
+    then one texel's values)."""
     from .expr import NumpyBackend
 
     mapping = MAPPINGS[model_id]
     bulk = mapping.numpy_bulk(p, form) if hasattr(mapping, "numpy_bulk") else None
-    return NumpyBackend(wo, {**input_values(model_id, p, form), **view_inputs(model_id, p, form)}, form, bulk)
+    return NumpyBackend(wo, {**input_values(model_id, p, form), **view_inputs(model_id, p, form, texels)}, form, bulk)
 
 
 def input_values(model_id: str, p, form: str) -> dict:
@@ -65,8 +66,8 @@ def view_inputs(model_id: str, p, form: str, texels=None) -> dict:
     return mapping.view_inputs(p, form, texels) if hasattr(mapping, "view_inputs") else {}
 
 
-def _backend(model_id: str, p, form: str, wo, fit=None):
-    b = numpy_backend(model_id, p, form, wo)
+def _backend(model_id: str, p, form: str, wo, fit=None, texels=None):
+    b = numpy_backend(model_id, p, form, wo, texels)
     shade(b, model_id, p, fit)
     return b
 
@@ -88,11 +89,13 @@ def predicted_eval(model_id: str, p, form: str, fit=None):
     return lambda wi, wo: _backend(model_id, p, form, wo, fit).evaluate(wi)
 
 
-def predicted_furnace(model_id: str, p, form: str, fit=None):
-    """``a(wo)``: what a white furnace shows through the form (``expr.closure_furnace``)."""
+def predicted_furnace(model_id: str, p, form: str, fit=None, texels=None, quadratures=None):
+    """``a(wo)``: what a white furnace shows through the form (``expr.closure_furnace``, with its ``quadratures``);
+    with ``texels`` (``view_inputs``'), what one texel of values ``p`` of a texture-driven material shows."""
     from .expr import closure_furnace
 
-    return lambda wo: closure_furnace(lambda w: _backend(model_id, p, form, w, fit), wo)
+    extra = {} if quadratures is None else {"quadratures": quadratures}
+    return lambda wo: closure_furnace(lambda w: _backend(model_id, p, form, w, fit, texels), wo, **extra)
 
 
 def predicted_image(model_id: str, p, form: str, scene, fit=None):

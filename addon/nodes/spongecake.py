@@ -45,10 +45,11 @@ layer is optically thick or the lobe is narrow); docs/accuracy.md names and meas
   a packed float image of e over asin(√μ) (the view's angle near the normal, √μ near grazing), and over the view's
   azimuth too where a layer is oriented off the normal, looked up bilinearly at the view (``view_inputs``,
   ``view_table``, ``view_wiring``): one texture lookup, where a chain of mixes between knots cost the node group
-  more (docs/training.md). Where a texture drives one float layer input of an isotropic stack, the table's columns
-  are that input's values instead (``TexelEnergy``: 9 of them over the texels' range, made safe between them) and
-  the lookup takes the texture's value; other texture-driven materials keep one table and leave the energy fraction
-  out of it (each texel then keeps its baked lobes' own energy). [approx: ms-energy]
+  more (docs/training.md). Where a texture drives one layer input of an isotropic stack (a thickness, roughness or
+  albedo), the table's columns are that input's values instead (``TexelEnergy``: 9 of them over the texels' range,
+  made safe between them; greys for an albedo, each channel looked up at its own) and the lookup takes the
+  texture's value; other texture-driven materials keep one table and leave the energy fraction out of it (each
+  texel then keeps its baked lobes' own energy). [approx: ms-energy]
   In the node group each fiber layer's GGX lobe and the network's lobe for that layer are one Glossy BSDF (colours
   summed, α_x mixed harmonically: ``_FiberLobes``), and its budget is computed on that. [approx: ms-merged-fiber-lobe]
 
@@ -115,7 +116,8 @@ APPROXIMATIONS = {
     "ms-energy": ("multiple scattering's energy scale on the form's own single scattering (not the reference's; "
                   "where that exceeds 1, it is scaled down), in a table over asin(√μ) (32 rows; by 64 azimuths "
                   "where a layer is oriented), bilinear (the reference bounds the interpolation's error; the table "
-                  "does not); one per material in texture-driven bakes",
+                  "does not); in a texture-driven bake by 9 values of one driven input (per channel at greys for "
+                  "an albedo), else one per material without the energy fraction",
                   {**_one(type="surface", roughness=0.5, thickness=1.0), "multiple_scattering": True}),
     "ms-weights-at-normal": ("the multiple-scattering closures' weights are the layer math's for the view along "
                              "the normal (constants Cycles folds), their total restored per view by the energy "
@@ -379,10 +381,12 @@ def view_inputs(p: model.Params, form: str, texels: "TexelEnergy | None" = None)
 @dataclass(frozen=True)
 class TexelEnergy:
     """How the energy budget of a material whose layer inputs are driven by textures follows its texels (decided by
-    its texture bake: ``texel_energy``). With an ``axis`` (one float layer input of an isotropic stack driven), the
-    budget table has a column per tabulated value of that input and is looked up at the texel's value. Without one
-    (several inputs driven, a colour or an orientation, or an oriented stack, whose table already spends its columns
-    on the azimuth), no table follows the texels: the budget leaves out the energy fraction (``bake.spongecake.
+    its texture bake: ``texel_energy``). With an ``axis`` (one layer input of an isotropic stack driven), the
+    budget table has a column per tabulated value of that input and is looked up at the texel's value; with one layer
+    albedo driven, at greys, each channel looked up at its own value (a channel's budget follows its own albedo, all
+    but the lobe network's coupling of the channels: docs/accuracy.md measures it). Without one (several inputs
+    driven, an orientation, or an oriented stack, whose table already spends its columns on the azimuth), no table
+    follows the texels: the budget leaves out the energy fraction (``bake.spongecake.
     energy_grid``), so that each texel keeps the energy its own baked lobes carry, as the network predicts it."""
     axis: object = None  # a ``view_table.Axis``, or None
 
@@ -409,8 +413,9 @@ DRIVEN_ENERGY_OFFSET = 0.01
 
 def texel_energy(p: model.Params, ranges: dict) -> TexelEnergy | None:
     """How the budget of ``p`` follows its texels (``TexelEnergy``), from the least and greatest value of each driven
-    layer input (``ranges``: (layer index, parameter name) → (least, greatest), clamped to the parameter's range, or
-    None for a colour or a direction: ``bake.textures.float_ranges``); None where no texture drives a layer."""
+    layer input (``ranges``: (layer index, parameter name) → (least, greatest) over the texels (and channels),
+    clamped to the parameter's range, or None for a direction: ``bake.textures.input_ranges``); None where no texture
+    drives a layer."""
     from .view_table import Axis
 
     if not ranges:
@@ -418,10 +423,11 @@ def texel_energy(p: model.Params, ranges: dict) -> TexelEnergy | None:
     (layer, name), span = next(iter(ranges.items()))
     if len(ranges) > 1 or span is None or model.anisotropic(p):
         return TexelEnergy()
-    lo, hi = span
     socket = next(s.name for s in sockets(p) if s.layer == layer and s.param.name == name and not s.baked)
+    if name == "albedo":  # uniform in log(1 + offset − albedo): dense near white, where multiple scattering grows
+        return TexelEnergy(Axis.spaced(socket, *span, DRIVEN_ENERGY_VALUES, 1.0 + DRIVEN_ENERGY_OFFSET, -1.0, True))
     offset = None if name == "roughness" and p.layers[layer].type == "hg" else DRIVEN_ENERGY_OFFSET
-    return TexelEnergy(Axis.spaced(socket, float(lo), float(hi), DRIVEN_ENERGY_VALUES, offset))
+    return TexelEnergy(Axis.spaced(socket, *span, DRIVEN_ENERGY_VALUES, offset))
 
 
 def budget_table(p: model.Params, form: str, texels: TexelEnergy | None = None):
@@ -433,9 +439,12 @@ def budget_table(p: model.Params, form: str, texels: TexelEnergy | None = None):
     on ``model.view_energy_grid``: over the view's angle, and its azimuth where a layer is oriented off the normal (a
     budget per view cosine, the least over the azimuths, would leave the multiple scattering short by up to 70% at
     other azimuths: docs/training.md). A texture-driven material's table follows its texels as ``texels`` says
-    (``TexelEnergy``). Cached per stack, form, weights folder and ``texels``."""
+    (``TexelEnergy``; the driven input's own value in ``p`` does not count then). Cached per stack, form, weights
+    folder and ``texels``."""
     from ..bake import spongecake as bake
 
+    if texels is not None and texels.axis is not None:
+        p = with_values(p, {**input_values(p), texels.axis.socket: texels.axis.value(texels.axis.values[0])})
     return _budget_table(p, form, str(bake.WEIGHTS), texels)
 
 
@@ -445,10 +454,11 @@ def _budget_table(p: model.Params, form: str, weights: str, texels: TexelEnergy 
     from .view_table import ViewTable
 
     rows, azimuths = model.view_energy_grid(p)
-    left_of, lobes_of = partial(_left, form=form), partial(_ms_furnace, form=form)
+    left_of, lobes_of = partial(_left, form=form), partial(ms_closure_albedo, form=form)
     axis = texels and texels.axis
     if axis:
-        stacks = [with_values(p, {**input_values(p), axis.socket: v}) for v in axis.finer(DRIVEN_ENERGY_SUBSTEPS)]
+        stacks = [with_values(p, {**input_values(p), axis.socket: axis.value(v)})
+                  for v in axis.finer(DRIVEN_ENERGY_SUBSTEPS)]
         table = driven_budget_rows(stacks, left_of, lobes_of, rows, VIEW_BUDGET_SUBSTEPS[0], DRIVEN_ENERGY_SUBSTEPS)
         return ViewTable(table, model.view_table_lowest(), axis)
     substeps = VIEW_BUDGET_SUBSTEPS if azimuths > 1 else VIEW_BUDGET_SUBSTEPS[:1]
@@ -463,7 +473,7 @@ def ms_share(p: model.Params, form: str) -> float:
     normal = np.array([[0.0, 0.0, 1.0]])
     ss = _part_furnace(p, normal, form, single=True)
     budget = budget_table(p, form).values[-1, 0]  # the last row: μ = 1
-    ms = _ms_furnace(p, normal, form) * np.maximum(budget - 1.0, 0.0)
+    ms = ms_closure_albedo(p, normal, form) * np.maximum(budget - 1.0, 0.0)
     total = float(np.mean(ss + ms))
     return float(np.mean(ms)) / total if total > 0.0 else 0.0
 
@@ -473,8 +483,9 @@ def _left(p: model.Params, wo, form: str):
     return 1.0 - _part_furnace(replace(p, delta_transmission=True), wo, form, single=True)
 
 
-def _ms_furnace(p: model.Params, wo, form: str):
-    """Albedo (N, 3) of the form's multiple-scattering closures before the energy scale."""
+def ms_closure_albedo(p: model.Params, wo, form: str):
+    """Albedo (N, 3) towards ``wo`` of the form's multiple-scattering closures before the energy scale (the E of
+    ``bake.spongecake.energy_scale``)."""
     return _part_furnace(p, wo, form, single=False)
 
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -28,40 +28,56 @@ from .expr import MIN_COS
 
 @dataclass(frozen=True)
 class Axis:
-    """A table's columns over the value of the shader input ``socket`` (a float): ``values`` ascending, uniform in
-    log(value + ``offset``), or in the value where ``offset`` is None."""
+    """A table's columns over the value of the shader input ``socket``: ``values`` ascending, uniform in
+    log(``sign`` · value + ``offset``), or in the value where ``offset`` is None. For a colour input (``channels``)
+    the values are greys and each channel is looked up at its own value."""
     socket: str
     values: tuple
     offset: float | None = None
+    sign: float = 1.0
+    channels: bool = False
 
     @classmethod
-    def spaced(cls, socket: str, lo: float, hi: float, count: int, offset: float | None = None) -> "Axis":
-        """``count`` values from ``lo`` to ``hi`` uniform in log(value + ``offset``) (or in the value); one where
-        they are equal."""
-        return cls(socket, _spaced(lo, hi, count if hi > lo else 1, offset), offset)
+    def spaced(cls, socket: str, lo: float, hi: float, count: int, offset: float | None = None, sign: float = 1.0,
+               channels: bool = False) -> "Axis":
+        """``count`` values from ``lo`` to ``hi`` spaced as the axis is (one where they are equal)."""
+        axis = cls(socket, (float(lo), float(hi)), offset, sign, channels)
+        return replace(axis, values=axis._spaced(count if hi > lo else 1))
 
     def finer(self, substeps: int) -> tuple:
         """The values with ``substeps`` − 1 more between each two, spaced as they are."""
-        return _spaced(self.values[0], self.values[-1], (len(self.values) - 1) * substeps + 1, self.offset)
+        return self._spaced((len(self.values) - 1) * substeps + 1)
+
+    def value(self, v: float):
+        """What the input holds at the axis value ``v`` (a grey for a colour input)."""
+        return (v,) * 3 if self.channels else v
 
     def to_json(self) -> list:
-        return [self.socket, list(self.values), self.offset]
+        return [self.socket, list(self.values), self.offset, self.sign, self.channels]
 
     @classmethod
     def from_json(cls, data) -> "Axis":
-        socket, values, offset = data
-        return cls(socket, tuple(float(v) for v in values), offset)
+        socket, values, offset, sign, channels = data
+        return cls(socket, tuple(float(v) for v in values), offset, float(sign), bool(channels))
 
     def position(self, x, b=np):
-        """Where the input's value ``x`` lies between the first value (0) and the last (1), on backend ``b`` (numpy
-        or an ``expr`` backend); 0 where there is one value."""
+        """Where the input's value ``x`` (a channel's, for a colour input) lies between the first value (0) and the
+        last (1), on backend ``b`` (numpy or an ``expr`` backend); 0 where there is one value."""
         if len(self.values) == 1:
             return 0.0
         lo, hi = self._warped(self.values[0], math), self._warped(self.values[-1], math)
         return (self._warped(x, b) - lo) * (1.0 / (hi - lo))
 
     def _warped(self, x, b):
-        return x if self.offset is None else b.log(x + self.offset)
+        return x if self.offset is None else b.log(self.sign * x + self.offset)
+
+    def _spaced(self, count: int) -> tuple:
+        lo, hi = self.values[0], self.values[-1]
+        if count == 1:
+            return (float(lo),)
+        warped = np.linspace(self._warped(lo, math), self._warped(hi, math), count)
+        inner = warped[1:-1] if self.offset is None else (np.exp(warped[1:-1]) - self.offset) / self.sign
+        return tuple(float(v) for v in np.concatenate([[lo], inner, [hi]]))
 
 
 @dataclass(frozen=True, eq=False)
@@ -108,22 +124,17 @@ class ViewTable:
         clamped at the edges)."""
         (sx, ox), (sy, oy) = self.texel_coordinates()
         pixels = self.pixels()
+        y = (np.arcsin(np.sqrt(np.minimum(np.maximum(wo[:, 2], MIN_COS), 1.0))) * sy + oy) * self.shape[0] - 0.5
+        image = pixels[..., :3].astype(np.float64)
         if self.axis is None:
             along = np.mod(np.arctan2(wo[:, 1], wo[:, 0]), 2.0 * math.pi) / (2.0 * math.pi)
         else:
-            along = np.broadcast_to(self.axis.position(np.asarray(inputs[self.axis.socket], np.float64)), len(wo))
+            value = np.asarray(inputs[self.axis.socket], np.float64)
+            along = np.broadcast_to(self.axis.position(value), (len(wo), 3) if self.axis.channels else len(wo))
         x = (along * sx + ox) * pixels.shape[1] - 0.5
-        y = (np.arcsin(np.sqrt(np.minimum(np.maximum(wo[:, 2], MIN_COS), 1.0))) * sy + oy) * self.shape[0] - 0.5
-        return _bilinear(pixels[..., :3].astype(np.float64), x, y)
-
-
-def _spaced(lo: float, hi: float, count: int, offset: float | None) -> tuple:
-    if count == 1:
-        return (float(lo),)
-    if offset is None:
-        return tuple(float(v) for v in np.linspace(lo, hi, count))
-    warped = np.linspace(math.log(lo + offset), math.log(hi + offset), count)
-    return tuple(float(v) for v in np.concatenate([[lo], np.exp(warped[1:-1]) - offset, [hi]]))
+        if x.ndim == 1:
+            return _bilinear(image, x, y)
+        return np.stack([_bilinear(image, x[:, c], y)[:, c] for c in range(3)], axis=1)  # each channel at its value
 
 
 def _bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:

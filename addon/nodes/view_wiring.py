@@ -44,40 +44,74 @@ def fed(socket) -> bool:
 
 
 def lookups(tree) -> list:
-    """Lamina's view-table nodes in ``tree``: the Image Texture nodes and their coordinate groups."""
+    """Lamina's view-table nodes in ``tree``: the Image Texture nodes, their coordinate groups and, for a table over a
+    colour input's channels, the nodes that split and join the channels."""
     return [n for n in tree.nodes if n.get(VIEW_TAG)]
 
 
+TABLE_KEY = "lamina_view_table"  # the table whose value a lookup's output node gives (nodes inside a lookup: "")
+
+
 def _image_name(tex) -> str | None:
-    return getattr(getattr(tex, "image", None), "name", None)
+    """The table a lookup's output node gives: its ``TABLE_KEY``, else its image's name (an Image Texture)."""
+    return tex.get(TABLE_KEY, getattr(getattr(tex, "image", None), "name", None))
 
 
 def _lookup(tree, node, table, follows=None):
-    """The Image Texture node of ``table`` (the one already in ``tree``, or a new one with its coordinates; those of a
-    table with an ``Axis`` take the value of what feeds ``follows``, or its constant)."""
+    """The node whose Color output is ``table`` at the view (the one already in ``tree``, or new ones): an Image
+    Texture with its coordinates, whose ``Axis`` value (if any) is what feeds ``follows`` (or its constant); for an
+    axis over a colour's channels, one such lookup per channel at that channel's value, joined by a Combine Color."""
     found = next((n for n in tree.nodes if n.get(VIEW_TAG) and _image_name(n) == table.name), None)
     if found is not None:
         return found
-    tex = tree.nodes.new("ShaderNodeTexImage")
-    tex[VIEW_TAG] = True
+    x, y = node.location.x - 320, node.location.y - 420
+    value = None if table.axis is None else linked_from(follows)
+    if table.axis is not None and value is None:
+        value = follows.default_value
+    if table.axis is None or not table.axis.channels:
+        return _texture(tree, node, table, (x, y), value)
+    split = _new(tree, node, "ShaderNodeSeparateColor", (x - 660, y))
+    _feed(tree, split.inputs[0], value)
+    join = _new(tree, node, "ShaderNodeCombineColor", (x + 220, y))
+    join[TABLE_KEY] = table.name
+    for c in range(3):
+        tex = _texture(tree, node, table, (x, y - 300 * c), split.outputs[c])
+        tex[TABLE_KEY] = ""
+        channel = _new(tree, node, "ShaderNodeSeparateColor", (x + 110, y - 300 * c))
+        tree.links.new(tex.outputs["Color"], channel.inputs[0])
+        tree.links.new(channel.outputs[c], join.inputs[c])
+    return join
+
+
+def _new(tree, node, kind: str, location):
+    n = tree.nodes.new(kind)
+    n[VIEW_TAG] = True
+    n.parent = node.parent
+    n.location = location
+    return n
+
+
+def _texture(tree, node, table, location, value=None):
+    """An Image Texture node of ``table``'s image with its coordinates group; ``value`` feeds the group's input (an
+    output socket, or a constant) where the table has an ``Axis``."""
+    tex = _new(tree, node, "ShaderNodeTexImage", location)
     tex.image = bpy.data.images.get(table.name) or _image(table)
     tex.interpolation, tex.extension = "Linear", "EXTEND"
     tex.label = "Lamina view table"
-    tex.parent = node.parent
-    tex.location = (node.location.x - 320, node.location.y - 420)
-    coords = tree.nodes.new("ShaderNodeGroup")
-    coords[VIEW_TAG] = True
+    coords = _new(tree, node, "ShaderNodeGroup", (location[0] - 220, location[1]))
     coords.node_tree = _coordinates_group(table)
-    coords.parent = node.parent
-    coords.location = (tex.location.x - 220, tex.location.y)
     tree.links.new(coords.outputs[0], tex.inputs["Vector"])
     if table.axis is not None:
-        source = linked_from(follows)
-        if source is None:
-            coords.inputs[0].default_value = follows.default_value
-        else:
-            tree.links.new(source, coords.inputs[0])
+        _feed(tree, coords.inputs[0], value)
     return tex
+
+
+def _feed(tree, socket, value) -> None:
+    """Link ``socket`` from ``value`` (an output socket), or set it to ``value`` (a constant)."""
+    if isinstance(value, bpy.types.NodeSocket):
+        tree.links.new(value, socket)
+    else:
+        socket.default_value = value
 
 
 def _image(table):
@@ -117,9 +151,12 @@ def _coordinates(b: NodeBackend, sx, ox, sy, oy, over_azimuth: bool, along=None)
 
 
 def _unused(tree) -> list:
-    """Lamina's lookup nodes that feed nothing: Image Textures without links out, and coordinate groups that feed
-    only those."""
+    """Lamina's lookup nodes that feed nothing, or only other such nodes."""
     ours = lookups(tree)
-    idle = [n for n in ours if n.bl_idname == "ShaderNodeTexImage" and not n.outputs["Color"].is_linked]
-    return idle + [n for n in ours if n.bl_idname == "ShaderNodeGroup"
-                   and all(link.to_node in idle for o in n.outputs for link in o.links)]
+    idle: list = []
+    grew = True
+    while grew:
+        fresh = [n for n in ours if n not in idle and all(link.to_node in idle for o in n.outputs for link in o.links)]
+        idle += fresh
+        grew = bool(fresh)
+    return idle

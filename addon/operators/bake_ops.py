@@ -77,7 +77,7 @@ class BakeRun:
             return  # nothing to bake: finish() writes the constants
         texture_wiring.vector_source(self.sources)  # refuse textures with different mappings before computing
         self.inputs = texture_wiring.read_inputs(self.sources, self.warnings)
-        self.texels = mapping.texel_energy(self.params, textures.float_ranges(self.params, self.inputs))
+        self.texels = mapping.texel_energy(self.params, textures.input_ranges(self.params, self.inputs))
         self.key = textures.cache_key(self.params, self.inputs)
         self.paths = textures.cached_maps(self.params, self.folder, self.key)
         self.cache_hit = self.paths is not None

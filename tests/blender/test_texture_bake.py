@@ -242,6 +242,41 @@ def test_cycles_renders_the_shipped_networks_bake_per_half(form, saved, monkeypa
         assert err < 0.02, f"{form} {half}: {err:.4f}"
 
 
+def test_a_thickness_texture_gives_the_energy_table_a_column_per_tabulated_thickness(saved):
+    """The ``MS Energy`` table follows the texels (``nodes.spongecake.TexelEnergy``): its columns are thicknesses over
+    the texture's range and its coordinates take the texture's value; without the texture, a bake gives it back the
+    material's own table."""
+    path, _ = _halves(saved, "thickness")
+    mat, tex = _material("thickness", path)
+    bake_ops.bake(mat)
+    node = material.shader_node(mat)
+    lookup = node.inputs[mapping.MS_ENERGY_INPUT].links[0].from_node
+    assert tuple(lookup.image.size) == (mapping.DRIVEN_ENERGY_VALUES, model.VIEW_ENERGY_GRID[0])
+    assert lookup.inputs["Vector"].links[0].from_node.inputs[0].links[0].from_node == tex
+    axis = material.texel_energy(mat).axis
+    assert axis.socket == "L1 Thickness" and (axis.values[0], axis.values[-1]) == pytest.approx((0.3, 8.0), rel=1e-6)
+    mat.node_tree.links.remove(node.inputs["L1 Thickness"].links[0])
+    bake_ops.bake(mat)
+    assert material.texel_energy(mat) is None
+    assert node.inputs[mapping.MS_ENERGY_INPUT].links[0].from_node.image.size[0] == 2
+
+
+def test_an_albedo_texture_looks_each_channel_up_at_its_own_value_and_rebaking_leaves_no_lookup_behind(saved):
+    path, _ = _halves(saved, "albedo")
+    mat, tex = _material("albedo", path)
+    bake_ops.bake(mat)
+    node = material.shader_node(mat)
+    join = node.inputs[mapping.MS_ENERGY_INPUT].links[0].from_node
+    assert join.bl_idname == "ShaderNodeCombineColor" and material.texel_energy(mat).axis.channels
+    textures_read = {link.from_node.inputs[0].links[0].from_node.name for s in join.inputs[:3] for link in s.links}
+    assert len(textures_read) == 3
+    assert len(view_wiring.lookups(mat.node_tree)) == 11  # split, 3 × (coordinates, texture, channel), join
+    mat.node_tree.links.remove(node.inputs["L1 Albedo"].links[0])
+    bake_ops.bake(mat)
+    assert {n.bl_idname for n in view_wiring.lookups(mat.node_tree)} == {"ShaderNodeTexImage", "ShaderNodeGroup"}
+    assert len(view_wiring.lookups(mat.node_tree)) == 2
+
+
 # ---------------------------------------------------------------------------------------- cache, re-bake
 
 def test_rebaking_unchanged_inputs_is_a_cache_hit_that_replaces_only_lamina_nodes(saved, monkeypatch):

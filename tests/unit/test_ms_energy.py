@@ -12,7 +12,7 @@ import pytest
 
 from addon.bake import spongecake as bake
 from addon.models import spongecake as model
-from addon.nodes import _backend
+from addon.nodes import _backend, predicted_furnace
 from addon.nodes.closures_np import SHARP_ALBEDO
 from addon.nodes.expr import closure_furnace
 from addon.nodes.view_table import ViewTable
@@ -323,23 +323,9 @@ def test_the_budgets_white_stack_is_shaded_with_its_multiple_scattering(form):
     white = model.white(p)
     assert not white.multiple_scattering
     wo = _views(4, 3, (1.0,))
-    lobes = mapping._ms_furnace(white, wo, form)
-    np.testing.assert_allclose(lobes, mapping._ms_furnace(replace(white, multiple_scattering=True), wo, form))
+    lobes = mapping.ms_closure_albedo(white, wo, form)
+    np.testing.assert_allclose(lobes, mapping.ms_closure_albedo(replace(white, multiple_scattering=True), wo, form))
     assert not np.allclose(lobes, 1.0 - mapping._left(white, wo, form), rtol=0.05)
-
-
-def _driven_furnace(q, table, form, wo):
-    """The form's white furnace of the stack ``q`` as one texel of a texture-driven material renders it: its own
-    baked lobes (the texture bake's maps) and the material's ``MS Energy`` table looked up at its value."""
-    from addon.nodes import input_values, shade
-    from addon.nodes.expr import NumpyBackend
-
-    def backend(w):
-        b = NumpyBackend(w, {**input_values("spongecake", q, form), mapping.MS_ENERGY_INPUT: table}, form)
-        shade(b, "spongecake", q)
-        return b
-
-    return closure_furnace(backend, wo, quadratures=SHARP_ALBEDO)
 
 
 def _at_thickness(p, socket, x):
@@ -356,7 +342,8 @@ def test_a_thickness_driven_white_stack_returns_what_it_receives_between_the_tab
     assert table.axis == texels.axis and table.shape == (model.VIEW_ENERGY_GRID[0], mapping.DRIVEN_ENERGY_VALUES)
     socket, values = texels.axis.socket, np.asarray(texels.axis.values)
     for x in (np.sqrt(values[1] * values[2]), np.sqrt(values[5] * values[6]), 0.05):
-        a = _driven_furnace(_at_thickness(p, socket, float(x)), table, form, _views(7, 10, (1.0,)))
+        texel = _at_thickness(p, socket, float(x))  # its own baked lobes, the material's table at its value
+        a = predicted_furnace("spongecake", texel, form, texels=texels, quadratures=SHARP_ALBEDO)(_views(7, 10, (1.0,)))
         assert np.mean(np.abs(a - 1.0)) <= 0.02 and a.max() <= 1.02, (x, a[:, 0])
 
 
@@ -379,8 +366,8 @@ def test_a_driven_budget_follows_each_texels_own_budget():
 
 
 def test_which_texture_driven_materials_get_a_budget_that_follows_their_texels(monkeypatch):
-    """One float layer input of an isotropic stack: an axis over its texels' range (log-spaced; an hg layer's g
-    linearly). Anything else: no axis, and the budget leaves out the energy fraction, whose ratio would be the
+    """One layer input of an isotropic stack: an axis over its texels' range (log-spaced; an hg layer's g linearly;
+    an albedo at greys, denser towards white, each channel looked up at its own). Anything else: no axis, and the budget leaves out the energy fraction, whose ratio would be the
     material's at every texel."""
     p = _params({"layers": [{"type": "surface", "roughness": 0.3, "thickness": 1.0, "albedo": [0.5, 0.5, 0.5]},
                             {"type": "hg", "roughness": 0.2, "thickness": 2.0, "albedo": [0.5, 0.5, 0.5]}]})
@@ -390,7 +377,10 @@ def test_which_texture_driven_materials_get_a_budget_that_follows_their_texels(m
     assert thick.values[0] == 0.5 and thick.values[-1] == 4.0
     assert mapping.texel_energy(p, {(1, "roughness"): (-0.3, 0.6)}).axis.offset is None
     assert len(mapping.texel_energy(p, {(0, "roughness"): (0.3, 0.3)}).axis.values) == 1
-    for ranges in ({(0, "albedo"): None}, {(0, "thickness"): (0.5, 4.0), (1, "thickness"): (1.0, 2.0)}):
+    albedo = mapping.texel_energy(p, {(0, "albedo"): (0.2, 0.9)}).axis
+    assert albedo.channels and albedo.value(0.5) == (0.5, 0.5, 0.5)
+    assert np.all(np.diff(albedo.values) > 0) and np.diff(albedo.values)[-1] < np.diff(albedo.values)[0]
+    for ranges in ({(0, "orientation"): None}, {(0, "thickness"): (0.5, 4.0), (1, "thickness"): (1.0, 2.0)}):
         assert mapping.texel_energy(p, ranges) == mapping.TexelEnergy()
     tilted = replace(p, layers=(replace(p.layers[0], orientation=(0.6, 0.0, 0.8)), p.layers[1]))
     assert mapping.texel_energy(tilted, {(0, "thickness"): (0.5, 4.0)}) == mapping.TexelEnergy()

@@ -95,3 +95,17 @@ def test_an_axis_of_one_value_and_a_linear_axis():
     linear = Axis.spaced("L1 Roughness", -0.5, 0.5, 5)
     assert linear.values == pytest.approx((-0.5, -0.25, 0.0, 0.25, 0.5))
     assert Axis.from_json(linear.to_json()) == linear
+
+
+def test_a_table_over_a_colour_looks_each_channel_up_at_its_own_value():
+    from addon.nodes.view_table import Axis
+
+    axis = Axis.spaced("L1 Albedo", 0.2, 0.95, 5, offset=1.01, sign=-1.0, channels=True)
+    warped = np.log(1.01 - np.asarray(axis.values))
+    np.testing.assert_allclose(np.diff(warped), np.diff(warped)[0], rtol=1e-9)
+    values = np.random.default_rng(4).uniform(0.2, 2.0, (5, 5, 3))
+    t = ViewTable(values, LOWEST, axis)
+    v = values.astype(np.float32).astype(float)
+    got = t.at(_views([0.5 * math.pi], [0.0]), {axis.socket: (axis.values[0], axis.values[3], axis.values[4])})[0]
+    np.testing.assert_allclose(got, [v[-1, 0, 0], v[-1, 3, 1], v[-1, 4, 2]], rtol=1e-6)
+    assert Axis.from_json(axis.to_json()) == axis
