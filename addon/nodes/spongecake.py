@@ -390,6 +390,12 @@ class TexelEnergy:
     energy_grid``), so that each texel keeps the energy its own baked lobes carry, as the network predicts it."""
     axis: object = None  # a ``view_table.Axis``, or None
 
+    def note(self) -> str:
+        """What the panel says about it."""
+        if self.axis is None:
+            return "Energy: one table for all texels (each keeps its lobes' own energy)"
+        return f"Energy follows {self.axis.socket}'s texture ({len(self.axis.values)} values)"
+
     def to_json(self):
         return {"axis": self.axis and self.axis.to_json()}
 

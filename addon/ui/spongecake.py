@@ -37,6 +37,9 @@ def draw_extra(layout, context, mat) -> None:
     row.prop(context.window_manager, "lamina_auto_rebake")
     if hasattr(bpy.types, "LAMINA_OT_bake_textures"):
         box.operator("lamina.bake_textures", icon="TEXTURE")
+    texels = lamina_material.texel_energy(mat)
+    if texels is not None:
+        box.label(text=texels.note(), icon="INFO")
 
 
 def draw_compare_settings(col, settings) -> None:

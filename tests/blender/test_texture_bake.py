@@ -26,6 +26,7 @@ from addon.reference import metrics  # noqa: E402
 from addon.reference import scenes as S  # noqa: E402
 
 from renders import texture_halves  # noqa: E402
+from ui_helpers import panel_text  # noqa: E402
 
 pytestmark = pytest.mark.blender
 LAYER = {"type": "surface", "roughness": 0.3, "thickness": 1.0, "albedo": [0.8, 0.8, 0.8]}
@@ -242,7 +243,7 @@ def test_cycles_renders_the_shipped_networks_bake_per_half(form, saved, monkeypa
         assert err < 0.02, f"{form} {half}: {err:.4f}"
 
 
-def test_a_thickness_texture_gives_the_energy_table_a_column_per_tabulated_thickness(saved):
+def test_a_thickness_texture_gives_the_energy_table_a_column_per_tabulated_thickness(saved, registered):
     """The ``MS Energy`` table follows the texels (``nodes.spongecake.TexelEnergy``): its columns are thicknesses over
     the texture's range and its coordinates take the texture's value; without the texture, a bake gives it back the
     material's own table."""
@@ -253,6 +254,7 @@ def test_a_thickness_texture_gives_the_energy_table_a_column_per_tabulated_thick
     lookup = node.inputs[mapping.MS_ENERGY_INPUT].links[0].from_node
     assert tuple(lookup.image.size) == (mapping.DRIVEN_ENERGY_VALUES, model.VIEW_ENERGY_GRID[0])
     assert lookup.inputs["Vector"].links[0].from_node.inputs[0].links[0].from_node == tex
+    assert "Energy follows L1 Thickness's texture (9 values)" in panel_text(mat)
     axis = material.texel_energy(mat).axis
     assert axis.socket == "L1 Thickness" and (axis.values[0], axis.values[-1]) == pytest.approx((0.3, 8.0), rel=1e-6)
     mat.node_tree.links.remove(node.inputs["L1 Thickness"].links[0])
@@ -261,7 +263,7 @@ def test_a_thickness_texture_gives_the_energy_table_a_column_per_tabulated_thick
     assert node.inputs[mapping.MS_ENERGY_INPUT].links[0].from_node.image.size[0] == 2
 
 
-def test_an_albedo_texture_looks_each_channel_up_at_its_own_value_and_rebaking_leaves_no_lookup_behind(saved):
+def test_an_albedo_texture_is_looked_up_per_channel_and_rebaking_leaves_no_lookup_behind(saved, registered):
     path, _ = _halves(saved, "albedo")
     mat, tex = _material("albedo", path)
     bake_ops.bake(mat)
@@ -271,6 +273,7 @@ def test_an_albedo_texture_looks_each_channel_up_at_its_own_value_and_rebaking_l
     textures_read = {link.from_node.inputs[0].links[0].from_node.name for s in join.inputs[:3] for link in s.links}
     assert len(textures_read) == 3
     assert len(view_wiring.lookups(mat.node_tree)) == 11  # split, 3 × (coordinates, texture, channel), join
+    assert "Energy follows L1 Albedo's texture (9 values)" in panel_text(mat)
     mat.node_tree.links.remove(node.inputs["L1 Albedo"].links[0])
     bake_ops.bake(mat)
     assert {n.bl_idname for n in view_wiring.lookups(mat.node_tree)} == {"ShaderNodeTexImage", "ShaderNodeGroup"}
