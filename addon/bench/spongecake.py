@@ -601,7 +601,8 @@ def _measured_values(axis) -> list:
 
 def driven_energy_markdown() -> list[str]:
     lines = ["", "### Texture-driven stacks: the energy budget per texel", "",
-             "Where a texture drives one float layer input of an isotropic stack, the `MS Energy` table has a column "
+             "Where a texture drives one layer input of an isotropic stack (a thickness, roughness or albedo), the `MS "
+             "Energy` table has a column "
              f"per tabulated value of that input ({mapping.DRIVEN_ENERGY_VALUES} over the texture's range, computed "
              f"{mapping.DRIVEN_ENERGY_SUBSTEPS}× finer and made safe between them; `nodes.spongecake.TexelEnergy`) and "
              "is looked up at the texel's value. Measured at the tabulated values and "

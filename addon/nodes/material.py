@@ -564,6 +564,8 @@ def texel_energy(mat):
         return None
     texels = MAPPINGS[model_id].TexelEnergy.from_json(json.loads(mat[TEXEL_ENERGY_KEY]))
     node = shader_node(mat)
+    if node is None:
+        return None
     if texels.axis is not None:
         key = socket_key(node, texels.axis.socket)
         if key not in node.inputs or image_values.linked_from(node.inputs[key]) is None:

@@ -407,13 +407,13 @@ class TexelEnergy:
 
 
 # A texture-driven input's budget is tabulated at this many of its values, computed ``DRIVEN_ENERGY_SUBSTEPS`` times
-# finer (``bake.spongecake.driven_budget_rows``): with the energy fraction, a thickness-driven flake layer's
-# multiple-scattering scale interpolated between 9 values is within 2.8% of the exact one, between 5 within 11%
-# (docs/training.md, *What the ratio per texel needs*).
+# finer (``bake.spongecake.driven_budget_rows``): a thickness-driven flake layer's multiple-scattering scale
+# interpolated between 9 values was within 2.8% of the exact one, between 5 within 11% (docs/training.md, *What the
+# ratio per texel needs*); docs/accuracy.md, *Texture-driven stacks*, measures the shipped tables.
 DRIVEN_ENERGY_VALUES = 9
 DRIVEN_ENERGY_SUBSTEPS = 2
-# Thickness and flake roughness are tabulated uniformly in log(value + this); an hg layer's g (its roughness input)
-# uniformly in the value.
+# Thickness and flake roughness are tabulated uniformly in log(value + this), an albedo in log(1 + this − albedo), an
+# hg layer's g (its roughness input) uniformly in the value.
 DRIVEN_ENERGY_OFFSET = 0.01
 
 

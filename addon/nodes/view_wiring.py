@@ -26,7 +26,7 @@ def wire(node, tables: list[tuple]) -> list:
     for socket in node.inputs:
         for link in socket.links:
             table = wanted.get(socket.identifier)
-            if link.from_node.get(VIEW_TAG) and (table is None or _image_name(link.from_node) != table.name):
+            if link.from_node.get(VIEW_TAG) and (table is None or _table_name(link.from_node) != table.name):
                 tree.links.remove(link)
     lookups = {}
     for socket, table, follows in tables:
@@ -52,7 +52,7 @@ def lookups(tree) -> list:
 TABLE_KEY = "lamina_view_table"  # the table whose value a lookup's output node gives (nodes inside a lookup: "")
 
 
-def _image_name(tex) -> str | None:
+def _table_name(tex) -> str | None:
     """The table a lookup's output node gives: its ``TABLE_KEY``, else its image's name (an Image Texture)."""
     return tex.get(TABLE_KEY, getattr(getattr(tex, "image", None), "name", None))
 
@@ -61,7 +61,7 @@ def _lookup(tree, node, table, follows=None):
     """The node whose Color output is ``table`` at the view (the one already in ``tree``, or new ones): an Image
     Texture with its coordinates, whose ``Axis`` value (if any) is what feeds ``follows`` (or its constant); for an
     axis over a colour's channels, one such lookup per channel at that channel's value, joined by a Combine Color."""
-    found = next((n for n in tree.nodes if n.get(VIEW_TAG) and _image_name(n) == table.name), None)
+    found = next((n for n in tree.nodes if n.get(VIEW_TAG) and _table_name(n) == table.name), None)
     if found is not None:
         return found
     x, y = node.location.x - 320, node.location.y - 420

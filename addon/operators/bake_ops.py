@@ -3,7 +3,8 @@ maps (``bake.textures``) and wired into the Lamina node's ``MS`` inputs (``nodes
 
 A bake (``BakeRun``) has three phases: prepare (check the material, read and validate every texture, look for
 a cached bake of the same content), compute (the network, one chunk of texels per ``step``: the operator steps
-from a timer, so the UI stays responsive and Esc cancels between chunks) and ``finish`` (write the EXRs as one
+from a timer, so the UI stays responsive and Esc cancels between chunks; then, one step more, the energy budget table
+that follows the texels, ``nodes.spongecake.TexelEnergy``) and ``finish`` (write the EXRs as one
 set, then wire). Nothing is written before the computation is complete and nothing is wired before the files
 exist, so a refused, failed or cancelled bake leaves the material and the cache folder as they were.
 
