@@ -558,19 +558,30 @@ def set_texel_energy(mat, texels) -> None:
 
 def texel_energy(mat):
     """The recorded ``TexelEnergy`` of ``mat``, or None: none recorded, or its axis follows an input that is no
-    longer there or no longer linked (the material's own table then, until the next bake)."""
-    model_id, _ = current_params(mat)
-    if TEXEL_ENERGY_KEY not in mat.keys() or not hasattr(MAPPINGS[model_id], "TexelEnergy"):
-        return None
-    texels = MAPPINGS[model_id].TexelEnergy.from_json(json.loads(mat[TEXEL_ENERGY_KEY]))
+    longer there or no longer linked (the material's own table then, until the next bake). A material whose baked
+    inputs are fed by texture maps without a record (baked by an earlier Lamina) gets no axis: one table without the
+    energy fraction, so that each texel keeps its lobes' own energy until it is baked again."""
+    model_id, p = current_params(mat)
     node = shader_node(mat)
-    if node is None:
+    if node is None or not hasattr(MAPPINGS[model_id], "TexelEnergy"):
         return None
+    if TEXEL_ENERGY_KEY not in mat.keys():
+        return MAPPINGS[model_id].TexelEnergy() if _fed_by_maps(node, model_id, p) else None
+    texels = MAPPINGS[model_id].TexelEnergy.from_json(json.loads(mat[TEXEL_ENERGY_KEY]))
     if texels.axis is not None:
         key = socket_key(node, texels.axis.socket)
         if key not in node.inputs or image_values.linked_from(node.inputs[key]) is None:
             return None
     return texels
+
+
+def _fed_by_maps(node, model_id: str, p) -> bool:
+    """Whether a baked input of ``node`` is linked from something other than a view lookup (a texture bake's map)."""
+    for s in MAPPINGS[model_id].sockets(p):
+        socket = node.inputs.get(socket_key(node, s.name)) if s.baked else None
+        if socket is not None and socket.is_linked and not view_wiring.fed(socket):
+            return True
+    return False
 
 
 def _wire_view_inputs(mat, node, tables: dict) -> bool:

@@ -257,6 +257,10 @@ def test_a_thickness_texture_gives_the_energy_table_a_column_per_tabulated_thick
     assert "Energy follows L1 Thickness's texture (9 values)" in panel_text(mat)
     axis = material.texel_energy(mat).axis
     assert axis.socket == "L1 Thickness" and (axis.values[0], axis.values[-1]) == pytest.approx((0.3, 8.0), rel=1e-6)
+    del mat[material.TEXEL_ENERGY_KEY]  # as a texture bake of an earlier Lamina left it: one table, no fraction
+    assert material.texel_energy(mat) == mapping.TexelEnergy()
+    material.bake_constants(mat)
+    assert node.inputs[mapping.MS_ENERGY_INPUT].links[0].from_node.image.size[0] == 2
     mat.node_tree.links.remove(node.inputs["L1 Thickness"].links[0])
     bake_ops.bake(mat)
     assert material.texel_energy(mat) is None
