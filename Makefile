@@ -11,6 +11,7 @@ OUT ?= out
 export OPENBLAS_NUM_THREADS := 1
 # Multiple-scattering training data: a cache outside the repository (resumable; see docs/training.md).
 DATA ?= $(HOME)/.cache/lamina/spongecake-ms
+ENERGY_DATA ?= $(HOME)/.cache/lamina/spongecake-ms-energy
 # Neural participating media: tables of double and multiple scattering per material (resumable; docs/training.md).
 MEDIUM_DATA ?= $(HOME)/.cache/lamina/neural-medium
 
@@ -81,11 +82,12 @@ train: venv
 train-1 train-2: venv
 	$(PY) -m training.train --data $(DATA) --layers $(subst train-,,$@) --threads 1 --minutes $(TRAIN_MINUTES) --out addon/bake/weights
 
-# The energy-fraction networks (the share of what single scattering leaves that multiple scattering returns), one
-# after the other on 2 cores, ENERGY_MINUTES each; their targets' single-scattering albedos are cached beside the data.
+# The energy-fraction networks (the share of what single scattering leaves that multiple scattering returns) for
+# 1-4 layers: the random walk's tallies first (resumable, about an hour on 2 cores), then one network after the
+# other on 2 cores, ENERGY_MINUTES each.
 ENERGY_MINUTES ?= 10
 train-energy: venv
-	$(PY) -m training.energy_train --data $(DATA) --layers 1 2 --threads 2 --minutes $(ENERGY_MINUTES) --out addon/bake/weights
+	$(PY) -m training.energy_train --data $(ENERGY_DATA) --layers 1 2 3 4 --threads 2 --minutes $(ENERGY_MINUTES) --out addon/bake/weights
 
 # The neural_medium tables: 56 materials (7 albedos x 8 g), about an hour on 2 cores, resumable; and 4 materials
 # between the grid's albedos, only for evaluating the networks off the grid.
@@ -107,11 +109,12 @@ medium-networks: venv
 assets: venv
 	$(PY) -m addon.cli assets --out $(OUT)/assets --overwrite
 
-# The held-out validation set shipped in tests/data (independent seed, 4x the paths; 3 and 4 layers score the
-# grouped prediction).
+# The held-out validation sets shipped in tests/data (independent seed, 4x the paths; 3 and 4 layers score the
+# grouped prediction): the lobes' and the energy fraction's.
 validation-set: venv
 	$(PY) -m training.dataset --out tests/data/spongecake_ms_validation --seed 1001 --layers 1 2 3 4 \
 		--configs 16 16 16 16 --shard 16 --paths 16000 --n-wi 9 --n-wo 72
+	$(PY) -m training.energy_train --layers 1 2 3 4 --validation-set tests/data/spongecake_ms_energy_validation.npz
 
 extension: venv
 	mkdir -p dist

@@ -21,8 +21,8 @@ exact symmetry); 10% of the stacks held out, the checkpoint with the best split-
 held-out set with an independent seed and four times the paths (``--validation-set``, shipped in tests/data) is
 scored at export, against left from the reference as the add-on computes it.
 
-    python -m training.energy_train --data ~/.cache/lamina/spongecake-ms-energy --configs 4000 6000 --out addon/bake/weights
-    python -m training.energy_train --validation-set tests/data/spongecake_ms_energy_validation.npz
+    python -m training.energy_train --data ~/.cache/lamina/spongecake-ms-energy --layers 1 2 3 4 --out addon/bake/weights
+    python -m training.energy_train --layers 3 4 --validation-set tests/data/spongecake_ms_energy_validation.npz
 """
 from __future__ import annotations
 
@@ -70,6 +70,7 @@ QUICK = Size(configs=8, chunk=4, n_wi=4, paths=200)
 VALIDATION = Size(configs=32, chunk=32, n_wi=16, paths=16000)
 VALIDATION_SEED = 1001
 TALLIES = ("unscattered", "single", "multiple")  # the walk's: ``validation.ENERGY_ARRAYS`` after rows and wi
+CONFIGS = {1: 4000, 2: 11200, 3: 4000, 4: 4000}  # stacks per layer count (what the shipped networks saw)
 
 
 # ------------------------------------------------------------------------------------------------ data
@@ -134,8 +135,15 @@ def load(out: Path, n_layers: int) -> dict:
 
 
 def write_validation_set(path: Path, layer_counts=(1, 2), size: Size = VALIDATION, workers: int = 2) -> None:
-    """The held-out set: ``size.configs`` stacks per layer count, an independent seed, in one small file."""
-    arrays = {}
+    """The held-out set: ``size.configs`` stacks per layer count, an independent seed, in one small file; the other
+    layer counts of a file already there are kept (its sizes must be ``size``'s)."""
+    arrays, meta = {}, {"version": VERSION, "seed": VALIDATION_SEED, "configs": size.configs, "n_wi": size.n_wi,
+                        "paths": size.paths, "max_depth": size.max_depth}
+    if Path(path).exists():
+        with np.load(path) as f:
+            if json.loads(str(f["meta"])) != meta:
+                raise ValueError(f"{path} was made with other sizes: {str(f['meta'])}")
+            arrays = {k: f[k] for k in f.files if k != "meta"}
     with Pool(max(1, workers)) as pool:
         for n_layers in layer_counts:
             rows, wi, seeds = chunk_inputs(n_layers, 0, size, VALIDATION_SEED)
@@ -143,8 +151,6 @@ def write_validation_set(path: Path, layer_counts=(1, 2), size: Size = VALIDATIO
             arrays.update({f"layers{n_layers}_rows": rows, f"layers{n_layers}_wi": wi})
             for key in TALLIES:
                 arrays[f"layers{n_layers}_{key}"] = np.concatenate([p[key] for p in parts])
-    meta = {"version": VERSION, "seed": VALIDATION_SEED, "configs": size.configs, "n_wi": size.n_wi,
-            "paths": size.paths, "max_depth": size.max_depth}
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         np.savez_compressed(f, meta=np.array(json.dumps(meta)), **arrays)
 
@@ -257,8 +263,9 @@ def export(net, info: dict, samples: dict, data: dict, n_layers: int, out: Path,
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.energy_train", description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_CACHE, help=f"cache folder (default {DEFAULT_CACHE})")
-    ap.add_argument("--layers", type=int, nargs="+", default=[1, 2], choices=[1, 2])
-    ap.add_argument("--configs", type=int, nargs="+", default=[4000, 6000], help="stacks per layer count")
+    ap.add_argument("--layers", type=int, nargs="+", default=sorted(CONFIGS), choices=sorted(CONFIGS))
+    ap.add_argument("--configs", type=int, nargs="+",
+                    help=f"stacks per layer count, in --layers' order (default {CONFIGS})")
     ap.add_argument("--minutes", type=float, default=10.0, help="training time per network")
     ap.add_argument("--out", type=Path, help="folder for the .npz weights (addon/bake/weights ships)")
     ap.add_argument("--validation", type=Path, default=VALIDATION_SET)
@@ -277,7 +284,9 @@ def main(argv=None) -> int:
     if a.out is None:
         ap.error("--out is needed to train")
     size = QUICK if a.quick else Size(configs=0)
-    configs = [QUICK.configs] * len(a.layers) if a.quick else (a.configs + a.configs[-1:] * 2)[:len(a.layers)]
+    configs = a.configs or [QUICK.configs if a.quick else CONFIGS[n] for n in a.layers]
+    if len(configs) != len(a.layers):
+        ap.error(f"--configs gives {len(configs)} counts for {len(a.layers)} layer counts")
     generate(a.data, a.layers, configs, size, workers=a.workers)
     for n_layers in a.layers:
         data = load(a.data, n_layers)

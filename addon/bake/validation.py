@@ -11,8 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from . import layer_rows
-from ..reference.spongecake import eval_multiple, leftover
-from .spongecake import fraction_rows, network, predict_with
+from ..reference.frames import spherical
+from ..reference.spongecake import eval_multiple, leftover, lobes_albedo, single_leftover
+from .spongecake import energy_grid, fraction_rows, network, predict_with
 
 ARRAYS = ("rows", "wi", "wo", "ms", "ms_half_diff", "ss")
 ENERGY_ARRAYS = ("rows", "wi", "unscattered", "single", "multiple")  # ``training.energy_train``'s tallies
@@ -90,8 +91,13 @@ def energy_samples(data: dict, left: np.ndarray | None = None) -> dict:
 def fraction_errors(q: np.ndarray, samples: dict) -> np.ndarray:
     """Per stack, the relative energy error |Σ q left − Σ E_ms| / Σ E_ms over its wi and channels (as ``lobe_errors``
     scores a lobe's energy); stacks with less than 1e-3 of the largest energy are left out (NaN)."""
+    return relative_energy_errors(q * samples["left"], samples)
+
+
+def relative_energy_errors(energy: np.ndarray, samples: dict) -> np.ndarray:
+    """``fraction_errors`` of predicted multiple-scattering energies (flat, in ``samples``' order)."""
     n = samples["config"].max() + 1
-    predicted = np.bincount(samples["config"], weights=q * samples["left"], minlength=n)
+    predicted = np.bincount(samples["config"], weights=energy, minlength=n)
     truth = np.bincount(samples["config"], weights=samples["energy"], minlength=n)
     return np.where(truth > 1e-3 * truth.max(), np.abs(predicted - truth) / np.maximum(truth, 1e-300), np.nan)
 
@@ -109,4 +115,22 @@ def energy_errors(path, n_layers: int, net=None) -> dict:
     left = np.stack([leftover(layer_rows.params_from_rows(stack), wi) for stack, wi in zip(data["rows"], data["wi"])])
     q = fraction_rows(np.repeat(data["rows"], data["wi"].shape[1], axis=0), data["wi"].reshape(-1, 3), net)
     errors = fraction_errors(q.reshape(-1), energy_samples(data, left))
+    return {**error_summary(errors), "per_config": [None if np.isnan(e) else float(e) for e in errors]}
+
+
+def model_energy_errors(path, n_layers: int, fraction: bool = True) -> dict:
+    """``energy_errors``' measure of the model's multiple-scattering energy as the reference evaluates it: at each
+    held-out wi the shipped network's lobes' albedo towards wi times the energy scale there (``energy_grid`` at that
+    one view, no table between views), with the energy fraction or, ``fraction`` False, without it (the lobes' own
+    energy, at most what single scattering leaves). By reciprocity the light a view's lobes return is what the walk
+    tallies for light from that direction."""
+    data = load_energy_set(path, n_layers)
+    energy = []
+    for stack, wi in zip(data["rows"], data["wi"]):
+        params = layer_rows.params_from_rows(stack)
+        for w in wi:
+            mu, phi = np.array([w[2]]), np.array([np.arctan2(w[1], w[0])])
+            scale = energy_grid(params, single_leftover, lobes_albedo, mu, phi, fraction=fraction)[0, 0]
+            energy.append(scale * lobes_albedo(params, spherical(mu, phi))[0])
+    errors = relative_energy_errors(np.reshape(energy, -1), energy_samples(data))
     return {**error_summary(errors), "per_config": [None if np.isnan(e) else float(e) for e in errors]}

@@ -234,7 +234,7 @@ def validation_errors(folder: str) -> dict:
     from ..bake import validation
 
     out = {}
-    for n in (1, 2):
+    for n in range(1, model.MAX_LAYERS + 1):
         try:
             data = validation.load_shards(folder, n)
         except FileNotFoundError:
@@ -633,6 +633,7 @@ def driven_energy_markdown() -> list[str]:
 
 def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
     from ..bake import validation
+    from ..bake.spongecake import NETWORK_LAYERS
 
     lines = ["", "## Multiple scattering", "",
              "The network's lobes (Sec. 5) against the reference's independent random walk (orders ≥ 2). "
@@ -643,12 +644,15 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "`addon.bake.validation.lobe_errors` on `tests/data/spongecake_ms_validation` (independent seed, "
               "never trained on): relative L1 error of f_ms |cos θo| summed over each configuration's direction "
               "pairs, its relative energy error, and the Monte Carlo noise of the data (relative L1 of the standard "
-              "error) for scale.", ""]
+              "error) for scale. Stacks of 3 and 4 layers go through the two-layer network, grouped "
+              "(docs/training.md); their energy scale takes the energy fraction network of their own layer count.",
+              ""]
     if val:
         lines += ["| layers | energy scale | configs | pairs × paths | mean | median | worst | mean energy error | "
                   "Monte Carlo noise |", "|---|---|---|---|---|---|---|---|---|"]
         for (n, energy), v in val.items():
-            lines.append(f"| {n} | {'yes' if energy else 'no (the network alone)'} | {v['configs']} | "
+            layers = f"{n} (grouped)" if n > NETWORK_LAYERS else n
+            lines.append(f"| {layers} | {'yes' if energy else 'no (the network alone)'} | {v['configs']} | "
                          f"{v['n_wi']}×{v['n_wo']} × {v['paths']} | "
                          f"{pct(v['mean_relative_lobe_error'])} | {pct(v['median_relative_lobe_error'])} | "
                          f"{pct(v['worst_relative_lobe_error'])} | {pct(v['mean_relative_energy_error'])} | "
@@ -660,13 +664,25 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "seed, never trained on; the random walk's tally of the light leaving by orders ≥ 2, 16 wi × 16000 "
               "paths per stack): the network's share q of what single scattering and the Dirac leave, times that "
               "leftover from the reference, against the walk, per stack summed over wi and channels "
-              "(docs/training.md, *The energy fraction network*).", ""]
+              "(docs/training.md, *The energy fraction network*). The model: the same measure of the reference's "
+              "multiple scattering at each wi (the network's lobes' albedo there times the energy scale at that "
+              "view, `validation.model_energy_errors`), with the energy fraction and without it (the lobes' own "
+              "energy, at most what single scattering leaves; before MS_VERSION 10, and for 3 or 4 layers before "
+              "MS_VERSION 11). Mean / median / worst.", ""]
     if os.path.exists(sizes.energy_validation):
-        lines += ["| layers | stacks | mean energy error | median | worst |", "|---|---|---|---|---|"]
-        for n in (1, 2):
+        lines += ["| layers | stacks | network: mean energy error | median | worst | the model with the fraction | "
+                  "the model without it |", "|---|---|---|---|---|---|---|"]
+
+        def triple(v):
+            return " / ".join(pct(v[f"{k}_relative_energy_error"]) for k in ("mean", "median", "worst"))
+
+        for n in range(1, model.MAX_LAYERS + 1):
             v = validation.energy_errors(sizes.energy_validation, n)
+            with_fraction, without = (validation.model_energy_errors(sizes.energy_validation, n, fraction)
+                                      for fraction in (True, False))
             lines.append(f"| {n} | {v['configs']} | {pct(v['mean_relative_energy_error'])} | "
-                         f"{pct(v['median_relative_energy_error'])} | {pct(v['worst_relative_energy_error'])} |")
+                         f"{pct(v['median_relative_energy_error'])} | {pct(v['worst_relative_energy_error'])} | "
+                         f"{triple(with_fraction)} | {triple(without)} |")
     else:
         lines.append("Not measured: the energy validation set is missing (`python -m training.energy_train "
                      "--validation-set FILE`).")

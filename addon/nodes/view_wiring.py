@@ -59,19 +59,18 @@ def _table_name(tex) -> str | None:
 
 def _lookup(tree, node, table, follows=None):
     """The node whose Color output is ``table`` at the view (the one already in ``tree``, or new ones): an Image
-    Texture with its coordinates, whose ``Axis`` value (if any) is what feeds ``follows`` (or its constant); for an
-    axis over a colour's channels, one such lookup per channel at that channel's value, joined by a Combine Color."""
+    Texture with its coordinates, whose ``Axis`` value (if any) is the output that feeds ``follows`` (a table has an
+    axis only for a linked input: ``material.texel_energy``); for an axis over a colour's channels, one such lookup
+    per channel at that channel's value, joined by a Combine Color."""
     found = next((n for n in tree.nodes if n.get(VIEW_TAG) and _table_name(n) == table.name), None)
     if found is not None:
         return found
     x, y = node.location.x - 320, node.location.y - 420
     value = None if table.axis is None else linked_from(follows)
-    if table.axis is not None and value is None:
-        value = follows.default_value
     if table.axis is None or not table.axis.channels:
         return _texture(tree, node, table, (x, y), value)
     split = _new(tree, node, "ShaderNodeSeparateColor", (x - 660, y))
-    _feed(tree, split.inputs[0], value)
+    tree.links.new(value, split.inputs[0])
     join = _new(tree, node, "ShaderNodeCombineColor", (x + 220, y))
     join[TABLE_KEY] = table.name
     for c in range(3):
@@ -92,8 +91,8 @@ def _new(tree, node, kind: str, location):
 
 
 def _texture(tree, node, table, location, value=None):
-    """An Image Texture node of ``table``'s image with its coordinates group; ``value`` feeds the group's input (an
-    output socket, or a constant) where the table has an ``Axis``."""
+    """An Image Texture node of ``table``'s image with its coordinates group; ``value`` (an output socket) feeds the
+    group's input where the table has an ``Axis``."""
     tex = _new(tree, node, "ShaderNodeTexImage", location)
     tex.image = bpy.data.images.get(table.name) or _image(table)
     tex.interpolation, tex.extension = "Linear", "EXTEND"
@@ -102,16 +101,8 @@ def _texture(tree, node, table, location, value=None):
     coords.node_tree = _coordinates_group(table)
     tree.links.new(coords.outputs[0], tex.inputs["Vector"])
     if table.axis is not None:
-        _feed(tree, coords.inputs[0], value)
+        tree.links.new(value, coords.inputs[0])
     return tex
-
-
-def _feed(tree, socket, value) -> None:
-    """Link ``socket`` from ``value`` (an output socket), or set it to ``value`` (a constant)."""
-    if isinstance(value, bpy.types.NodeSocket):
-        tree.links.new(value, socket)
-    else:
-        socket.default_value = value
 
 
 def _image(table):

@@ -294,18 +294,24 @@ def energy_tables(params: Params):
 
 @lru_cache(maxsize=256)
 def _energy_tables(params: Params, weights: str):
-    from ..bake.spongecake import energy_table, predict
+    from ..bake.spongecake import energy_table
 
-    def left_of(stack, wo):
-        return leftover(replace(stack, multiple_scattering=False), wo)
-
-    def lobes_of(stack, wo):
-        return network_albedo(stack, predict(stack), wo)
-
-    above = energy_table(params, left_of, lobes_of)
+    above = energy_table(params, single_leftover, lobes_albedo)
     below = (np.zeros_like(above) if params.substrate is not None
-             else energy_table(params, left_of, lobes_of, -1.0))
+             else energy_table(params, single_leftover, lobes_albedo, -1.0))
     return above, below
+
+
+def single_leftover(params: Params, wo):
+    """``leftover`` of the stack's single scattering alone (what the energy scale shares out)."""
+    return leftover(replace(params, multiple_scattering=False), wo)
+
+
+def lobes_albedo(params: Params, wo):
+    """``network_albedo`` of the shipped network's unscaled lobes for the stack."""
+    from ..bake.spongecake import predict
+
+    return network_albedo(params, predict(params), wo)
 
 
 def leftover(params: Params, wo, n: int = ENERGY_SAMPLES):

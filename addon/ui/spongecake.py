@@ -25,7 +25,7 @@ def draw_extra(layout, context, mat) -> None:
     if not on:
         return
     if len(lamina_material.info(mat)["params"]["layers"]) > NETWORK_LAYERS:
-        box.label(text=f"{NETWORK_LAYERS}-layer network, layers grouped in two (an approximation)", icon="INFO")
+        box.label(text=f"Lobes: {NETWORK_LAYERS}-layer network, layers grouped in two (an approximation)", icon="INFO")
     stale = lamina_material.ms_is_stale(mat)
     if stale:
         box.label(text="Needs a re-bake: parameters, network or Lamina changed", icon="ERROR")

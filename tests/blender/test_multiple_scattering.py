@@ -228,7 +228,7 @@ def test_panel_shows_toggle_share_stale_warning_and_rebake():
     _set_thickness(mat, 3.0)
     assert "Needs a re-bake: parameters, network or Lamina changed" in panel_text(mat)
     text = panel_text(material.new_material(model.ID, _preset("leaf", multiple_scattering=True), "nodes"))
-    assert "layers grouped in two (an approximation)" in text and "lamina.rebake" in text
+    assert "Lobes: 2-layer network, layers grouped in two (an approximation)" in text and "lamina.rebake" in text
     text = panel_text(material.new_material(model.ID, _preset("leaf"), "nodes"))
     assert "lamina.set_multiple_scattering" in text and "lamina.rebake" not in text  # off: the toggle only
 
