@@ -208,7 +208,8 @@ def timed(fn) -> float:
 def fastest_renders(names, materials_of, samples: int, resolution: int, repeats: int = 3) -> list[dict]:
     """For each name, the Cycles render time of the sphere scene for each material of ``materials_of(name)``
     ({label: material}, created for the purpose and removed again): the fastest of ``repeats`` renders each,
-    which damps the machine's noise. Rows {"preset": name, label: seconds, ...}."""
+    which damps the machine's noise, rendered in rounds (each round renders every material once), so that a slow
+    drift of the machine's speed touches the materials compared alike. Rows {"preset": name, label: seconds, ...}."""
     import bpy
 
     from ..operators import blend_io
@@ -220,8 +221,12 @@ def fastest_renders(names, materials_of, samples: int, resolution: int, repeats:
     for name in names:
         before = blend_io.snapshot()
         try:
-            times = {label: min(render_cycles(mat, spec, samples, 0, path)[1] for _ in range(repeats))
-                     for label, mat in materials_of(name).items()}
+            mats = materials_of(name)
+            times = {label: [] for label in mats}
+            for _ in range(repeats):
+                for label, mat in mats.items():
+                    times[label].append(render_cycles(mat, spec, samples, 0, path)[1])
+            times = {label: min(seconds) for label, seconds in times.items()}
         finally:
             blend_io.remove_new_data(before)
         rows.append({"preset": name, **times})

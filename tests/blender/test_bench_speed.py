@@ -70,3 +70,25 @@ def test_the_speed_page_shows_both_tables(monkeypatch):
     assert "| fabric | 2.00 | 3.00 | 1.50 | 1.40–1.60 | 4.00 | 5.00 | 1.25 | 1.20–1.30 |" in page
     assert "| fabric | 1.00 | 1.40 | 1.45 | 1.30–1.50 | 2.00 | 2.50 | – | – |" in page  # the rounds' median ratio
     assert f"render at {64 * bench.SAMPLING_FACTOR} samples less its render at 64" in page
+
+
+def test_fastest_renders_render_in_rounds_so_a_drift_touches_every_material_alike(monkeypatch):
+    """A machine that slows down while the bench runs must not make the material rendered last look slower."""
+    from addon.bench import common
+
+    calls = []
+
+    def render(mat, spec, samples, seed, path):
+        calls.append(mat.name)
+        return None, 1.0 + 0.5 * len(calls)  # every render slower than the one before
+
+    monkeypatch.setattr("addon.operators.cycles_render.render_cycles", render)
+    mats = {}
+
+    def materials_of(name):
+        mats.update({label: bpy.data.materials.new(f"bench {label}") for label in ("a", "b")})
+        return mats
+
+    (row,) = common.fastest_renders(["x"], materials_of, samples=4, resolution=8, repeats=3)
+    assert calls == ["bench a", "bench b"] * 3
+    assert row["b"] - row["a"] == pytest.approx(0.5)  # the first round's renders, one after the other
