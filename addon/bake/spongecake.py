@@ -33,13 +33,12 @@ albedo' and f0' in (0, 1) (f0' = 1 for layers without Fresnel), T rho' in [0.01,
 orientation' = normalize(orientation + tanh(.)); W = softplus(.). ``decode`` is written against an
 array namespace so training (torch) and inference (numpy) share it.
 
-Stacks of 3 or 4 layers (no lobe network is trained for them) go through the two-layer network, grouped (an
+Stacks of 3 or 4 layers (no network is trained for them) go through the two-layer network, grouped (an
 approximation of the model itself, not of a Cycles form): the layers are split into a top and a bottom group where
 the optical thickness is most even; each group is lumped into one layer (its thickest layer's type, roughness, f0
 and orientation, its summed thickness, the thickness-weighted albedo); the network's outputs for the two lumped
 layers are applied, as residuals, to every layer of their group (``grouped_raw``). Its error against Monte Carlo is
-measured on held-out 3- and 4-layer stacks (docs/training.md). Their energy is not grouped: the energy fraction
-network of their own layer count sets it (``energy_fraction``).
+measured on held-out 3- and 4-layer stacks (docs/training.md).
 """
 from __future__ import annotations
 
@@ -73,8 +72,8 @@ MS_VERSION = 10  # what a bake holds: 2 adds the energy scale (the ``MS Energy``
 # form's budget on its own prediction (the node group's merged fiber lobes: ``nodes.spongecake._FiberLobes``), 9 one
 # ``MS Energy`` input fed from a view table for every stack (``nodes.spongecake.budget_table``), 10 the energy
 # fraction's network for stacks of 1 or 2 layers without a substrate (``energy_fraction``), with budget tables
-# that follow a texture-driven input (``driven_budget_rows``), 11 the energy fraction for stacks of 3 and 4 layers too
-NETWORK_LAYERS = 2  # lobe networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
+# that follow a texture-driven input (``driven_budget_rows``)
+NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 
 def weights_path(n_layers: int) -> Path:
@@ -93,10 +92,10 @@ def energy_weights_path(n_layers: int) -> Path:
 
 
 def energy_network(n_layers: int) -> mlp.MLP:
-    """The network that predicts the energy fraction (``energy_fraction``) of stacks of ``n_layers``: one per layer
-    count, none grouped (its inputs are the layers' own)."""
-    if not 1 <= n_layers <= model.MAX_LAYERS:
-        raise ValueError(f"stacks have 1 to {model.MAX_LAYERS} layers, got {n_layers}")
+    """The network that predicts the energy fraction (``energy_fraction``) of stacks of ``n_layers`` (1 or 2; deeper
+    stacks keep the lobes' own energy: ``energy_grid``)."""
+    if not 1 <= n_layers <= NETWORK_LAYERS:
+        raise ValueError(f"energy fraction networks are trained for 1 to {NETWORK_LAYERS} layers, got {n_layers}")
     return mlp.load(energy_weights_path(n_layers))
 
 
@@ -104,7 +103,8 @@ def ms_identity(n_layers: int) -> list:
     """What a stack's multiple scattering comes from: the manifests of the networks that predict it (lobes and
     energy fraction) and the version of what is made from the prediction (``MS_VERSION``, e.g. the energy scale);
     part of bake keys and fit keys."""
-    return [network(n_layers).manifest, energy_network(n_layers).manifest, MS_VERSION]
+    fraction = [energy_network(n_layers).manifest] if n_layers <= NETWORK_LAYERS else []
+    return [network(n_layers).manifest, *fraction, MS_VERSION]
 
 
 # ------------------------------------------------------------------------------------------- encoding
@@ -332,7 +332,7 @@ def energy_inputs(rows: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 
 def fraction_rows(rows: np.ndarray, w: np.ndarray, net: mlp.MLP | None = None) -> np.ndarray:
-    """The energy fraction (N, 3) of stacks (N, L, ROW) seen along w (N, 3) from above: the share of what single
+    """The energy fraction (N, 3) of stacks (N, L ≤ 2, ROW) seen along w (N, 3) from above: the share of what single
     scattering and the Dirac leave that multiple scattering returns (``energy_fraction``); the shipped network for L
     layers, or ``net``."""
     rows = np.asarray(rows, dtype=np.float64)
@@ -539,9 +539,11 @@ def energy_grid(params: model.Params, left_of, lobes_of, mu, phi, side: float = 
 
 
 def takes_fraction(params: model.Params) -> bool:
-    """Whether the energy scale follows the energy fraction network: stacks without a substrate (over one the
-    network has no data: the walk it is trained on has no substrate)."""
-    return params.substrate is None
+    """Whether the energy scale follows the energy fraction network: stacks of 1 or 2 layers without a substrate.
+    For 3 and 4 layers neither networks trained on them (4000 stacks each) nor the two-layer network on the stack
+    lumped in two were better than the lobes' own energy on both held-out sets (docs/training.md, *Stacks of 3 and
+    4 layers*); over a substrate it has no data."""
+    return params.substrate is None and len(params.layers) <= NETWORK_LAYERS
 
 
 # A white stack's energy fraction is 1 (what single scattering leaves, multiple scattering returns); within the

@@ -667,8 +667,8 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "(docs/training.md, *The energy fraction network*). The model: the same measure of the reference's "
               "multiple scattering at each wi (the network's lobes' albedo there times the energy scale at that "
               "view, `validation.model_energy_errors`), with the energy fraction and without it (the lobes' own "
-              "energy, at most what single scattering leaves; before MS_VERSION 10, and for 3 or 4 layers before "
-              "MS_VERSION 11). Mean / median / worst.", ""]
+              "energy, at most what single scattering leaves: what stacks of 3 and 4 layers render, and 1 and 2 layers "
+              "before MS_VERSION 10). Mean / median / worst.", ""]
     if os.path.exists(sizes.energy_validation):
         lines += ["| layers | stacks | network: mean energy error | median | worst | the model with the fraction | "
                   "the model without it |", "|---|---|---|---|---|---|---|"]
@@ -677,9 +677,12 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
             return " / ".join(pct(v[f"{k}_relative_energy_error"]) for k in ("mean", "median", "worst"))
 
         for n in range(1, model.MAX_LAYERS + 1):
+            without = validation.model_energy_errors(sizes.energy_validation, n, fraction=False)
+            if n > NETWORK_LAYERS:  # no fraction network (docs/training.md): the lobes' own energy
+                lines.append(f"| {n} | {without['configs']} | none | | | not used | {triple(without)} |")
+                continue
             v = validation.energy_errors(sizes.energy_validation, n)
-            with_fraction, without = (validation.model_energy_errors(sizes.energy_validation, n, fraction)
-                                      for fraction in (True, False))
+            with_fraction = validation.model_energy_errors(sizes.energy_validation, n)
             lines.append(f"| {n} | {v['configs']} | {pct(v['mean_relative_energy_error'])} | "
                          f"{pct(v['median_relative_energy_error'])} | {pct(v['worst_relative_energy_error'])} | "
                          f"{triple(with_fraction)} | {triple(without)} |")
