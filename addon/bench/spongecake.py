@@ -645,7 +645,7 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "never trained on): relative L1 error of f_ms |cos θo| summed over each configuration's direction "
               "pairs, its relative energy error, and the Monte Carlo noise of the data (relative L1 of the standard "
               "error) for scale. Stacks of 3 and 4 layers go through the two-layer network, grouped "
-              "(docs/training.md); their energy scale takes the energy fraction network of their own layer count.",
+              "(docs/training.md); their energy scale keeps the lobes' own energy (no energy fraction).",
               ""]
     if val:
         lines += ["| layers | energy scale | configs | pairs × paths | mean | median | worst | mean energy error | "
