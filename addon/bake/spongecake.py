@@ -556,8 +556,9 @@ MAX_SCALE = 20.0  # the most the energy fraction may scale the network's lobes b
 def fraction_limit(params: model.Params, wo, mu, left, lobes) -> np.ndarray:
     """The energy scale's limit (len(wo), 3) for a stack that takes the energy fraction (``takes_fraction``):
     q left / E, the scale that gives the lobes the energy fraction q (``energy_fraction``) of what single scattering
-    and the Dirac leave, at most ``MAX_SCALE``; q moves to 1 for stacks that conserve energy once white, by their whiteness
-    (``FRACTION_WHITENESS_POWER``), so that a white stack returns exactly what it receives less the margin."""
+    and the Dirac leave, at most ``MAX_SCALE``; q moves to 1 for stacks that conserve energy once white, by their
+    whiteness (``FRACTION_WHITENESS_POWER``), so that a white stack returns exactly what it receives less the
+    margin."""
     fraction = _normal_view_averaged(energy_fraction(params, wo), mu)
     if model.conserving(params):
         white = whiteness_of(params, FRACTION_WHITENESS_POWER)

@@ -122,8 +122,9 @@ def model_energy_errors(path, n_layers: int, fraction: bool = True) -> dict:
     """``energy_errors``' measure of the model's multiple-scattering energy as the reference evaluates it: at each
     held-out wi the shipped network's lobes' albedo towards wi times the energy scale there (``energy_grid`` at that
     one view, no table between views), with the energy fraction or, ``fraction`` False, without it (the lobes' own
-    energy, at most what single scattering leaves). By reciprocity the light a view's lobes return is what the walk
-    tallies for light from that direction."""
+    energy, at most what single scattering leaves, scaled towards all of that for stacks close to white:
+    ``white_limit``). By reciprocity the light a view's lobes return is what the walk tallies for light from that
+    direction."""
     data = load_energy_set(path, n_layers)
     energy = []
     for stack, wi in zip(data["rows"], data["wi"]):
