@@ -233,24 +233,118 @@ def fastest_renders(names, materials_of, samples: int, resolution: int, repeats:
     return rows
 
 
+# The sampling-only cost: the render at this many times the bench's samples less the render at the bench's samples.
+SAMPLING_FACTOR = 4
+
+
+def paired_render_times(names, materials_of, samples: int, resolution: int, repeats: int) -> list[dict]:
+    """For each name, the Cycles render times of the sphere scene for each material of ``materials_of(name)``
+    ({label: material}, created for the purpose and removed again), at ``samples`` and at ``SAMPLING_FACTOR`` times
+    as many, in ``repeats`` rounds (each round renders every material at both counts, in turn). Rows {"preset":
+    name, "whole": {label: [the render at ``samples`` per round]}, "sampling": {label: [the render at the larger
+    count less the render at ``samples``, per round]}}: the time of the samples between them alone, what shading
+    costs (the scene sync, shader compilation and kernel set-up are the same in both and cancel). ``compared``
+    reads two labels' rows."""
+    import bpy
+
+    from ..operators import blend_io
+    from ..operators.cycles_render import render_cycles
+
+    spec = ref_scenes.sphere_scene(resolution=resolution)
+    path = os.path.join(bpy.app.tempdir, "bench_pairs.exr")
+    counts = (samples, SAMPLING_FACTOR * samples)
+    rows = []
+    for name in names:
+        before = blend_io.snapshot()
+        try:
+            mats = materials_of(name)
+            times = {(label, n): [] for label in mats for n in counts}
+            for _ in range(repeats):
+                for label, mat in mats.items():
+                    for n in counts:
+                        times[label, n].append(render_cycles(mat, spec, n, 0, path)[1])
+        finally:
+            blend_io.remove_new_data(before)
+        rows.append({"preset": name, "whole": {label: times[label, counts[0]] for label in mats},
+                     "sampling": {label: [b - a for a, b in zip(times[label, counts[0]], times[label, counts[1]])]
+                                  for label in mats}})
+    return rows
+
+
+def compared(row: dict, label, base) -> dict:
+    """``label``'s render time against ``base``'s in a row of ``paired_render_times``. Whole renders: the fastest of
+    each (``base``, ``other``), ``ratio`` theirs and ``rounds`` each round's ratio. Sampling alone: the median over the
+    rounds of each (``base_sampling``, ``sampling``); ``sampling_ratio`` is the median of each round's ratio (a
+    round's renders share the machine's state, so slow drifts cancel too, and the median ignores a round that a
+    hiccup disturbed) and ``sampling_rounds`` holds them (their spread is the measurement's)."""
+    whole, sampling = row["whole"], row["sampling"]
+    rounds = [b / a for a, b in zip(sampling[base], sampling[label]) if a > 0.0]
+    return {"base": min(whole[base]), "other": min(whole[label]),
+            "ratio": min(whole[label]) / min(whole[base]),
+            "rounds": [b / a for a, b in zip(whole[base], whole[label])],
+            "base_sampling": float(np.median(sampling[base])), "sampling": float(np.median(sampling[label])),
+            "sampling_ratio": float(np.median(rounds)) if rounds else float("nan"), "sampling_rounds": rounds}
+
+
+def ratio_cells(c: dict, kind: str = "") -> list[str]:
+    """A ``compared`` result's table cells: base s, other s, ratio, the rounds' range; ``kind`` "" (whole renders)
+    or "sampling"."""
+    if kind:
+        base, other, ratio, rounds = c["base_sampling"], c["sampling"], c["sampling_ratio"], c["sampling_rounds"]
+    else:
+        base, other, ratio, rounds = c["base"], c["other"], c["ratio"], c["rounds"]
+    spread = f"{min(rounds):.2f}–{max(rounds):.2f}" if rounds else "–"
+    return [f"{base:.2f}", f"{other:.2f}", f"{ratio:.2f}" if np.isfinite(ratio) else "–", spread]
+
+
+FITTED_REPEATS = 3
+
+
+def fitted_speed_section(model_id: str, samples: int, resolution: int, repeats: int = FITTED_REPEATS) -> list[str]:
+    """"### Fitted against analytic mapping": each preset's render time with the fitted mapping against the
+    analytic one, both forms, sampling alone (``paired_render_times``; issue 14's goal: ≤ 1.0×)."""
+    from ..models import MODELS
+    from ..nodes import material as lamina_material
+
+    def materials(name):
+        p = MODELS[model_id].params_from_dict(presets.load(model_id, name))
+        return {(form, mapping): lamina_material.new_material(model_id, p, form, mapping=mapping)
+                for form in ("nodes", "osl") for mapping in ("analytic", "fitted")}
+
+    rows = paired_render_times(presets.names(model_id), materials, samples, resolution, repeats)
+    more = SAMPLING_FACTOR * samples
+    lines = ["", "### Fitted against analytic mapping", "",
+             f"The same material with the analytic and the fitted mapping, sphere scene, {resolution}×{resolution} "
+             f"px, {repeats} rounds, renders alternating. Sampling alone: the time of {more - samples} samples, each "
+             f"round's render at {more} samples less its render at {samples} (scene sync, shader compilation and "
+             "kernel set-up are the same in both and cancel: what shading the material costs), the median over the "
+             "rounds; the ratio is the median of the rounds' ratios, and their range beside it. Goal: fitted ≤ 1.0× "
+             "analytic.", "",
+             "| preset | node group analytic s | fitted s | fitted : analytic | per round | OSL analytic s | fitted s "
+             "| fitted : analytic | per round |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        cells = [r["preset"]]
+        for form in ("nodes", "osl"):
+            cells += ratio_cells(compared(r, (form, "fitted"), (form, "analytic")), "sampling")
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
 def pct(x: float) -> str:
     return f"{100 * x:.1f}%" if np.isfinite(x) else "n/a"
 
 
 def preset_render_times(model_id: str, samples: int, resolution: int, repeats: int = 3) -> list[dict]:
     """Cycles render time of each of the model's presets as node group, OSL and its Principled BSDF
-    (``principled_settings``: about the same lobe count, or the same material where the model has a counterpart),
-    and for models with a fitted mapping both forms fitted ("nodes fitted", "osl fitted")."""
+    (``principled_settings``: about the same lobe count, or the same material where the model has a counterpart).
+    ``fitted_speed_section`` measures the fitted mapping against the analytic one."""
     from ..models import MODELS
     from ..nodes import material as lamina_material
 
     def materials(name):
         p = MODELS[model_id].params_from_dict(presets.load(model_id, name))
-        out = {**{form: lamina_material.new_material(model_id, p, form) for form in ("nodes", "osl")},
-               "principled": lamina_material.principled_material(model_id, p)}
-        if fittable(model_id):
-            out.update({f"{form} fitted": lamina_material.new_material(model_id, p, form, mapping="fitted")
-                        for form in ("nodes", "osl")})
-        return out
+        return {**{form: lamina_material.new_material(model_id, p, form) for form in ("nodes", "osl")},
+                "principled": lamina_material.principled_material(model_id, p)}
 
     return fastest_renders(presets.names(model_id), materials, samples, resolution, repeats)

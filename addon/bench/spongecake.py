@@ -16,8 +16,9 @@ from ..nodes import spongecake as mapping
 from ..reference import metrics
 from ..reference import scenes as ref_scenes
 from ..reference import spongecake as reference
-from .common import (ACCURACY_SCENES, approximation_header, approximation_rows, comparison_scenes, mapping_errors,
-                     mapping_section, pct, preset_render_times, reference_throughput, timed)
+from .common import (ACCURACY_SCENES, SAMPLING_FACTOR, approximation_header, approximation_rows, compared,
+                     comparison_scenes, fitted_speed_section, mapping_errors, mapping_section, paired_render_times, pct,
+                     preset_render_times, ratio_cells, reference_throughput, timed)
 
 MODEL = model.ID
 
@@ -96,13 +97,12 @@ def benchmarks_markdown(samples: int, resolution: int) -> str:
              "3 renders, no bounces (OSL scenes enable the OSL shading system, as users must). The Principled BSDF "
              "material has about the same lobe count (coat for a second layer, sheen for fibers, "
              "transmission when nothing blocks the back).", "",
-             "| preset | node group s | OSL s | Principled s | node group : Principled | OSL : node group | "
-             "fitted : analytic node group | fitted : analytic OSL |",
-             "|---|---|---|---|---|---|---|---|"]
+             "| preset | node group s | OSL s | Principled s | node group : Principled | OSL : node group |",
+             "|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['preset']} | {r['nodes']:.2f} | {r['osl']:.2f} | {r['principled']:.2f} | "
-                     f"{r['nodes'] / r['principled']:.2f} | {r['osl'] / r['nodes']:.2f} | "
-                     f"{r['nodes fitted'] / r['nodes']:.2f} | {r['osl fitted'] / r['osl']:.2f} |")
+                     f"{r['nodes'] / r['principled']:.2f} | {r['osl'] / r['nodes']:.2f} |")
+    lines += fitted_speed_section(MODEL, samples, resolution)
     return "\n".join(lines) + "\n"
 
 
@@ -475,59 +475,20 @@ def bake_throughput(size: int) -> tuple[str, float]:
     return what, seconds / (size * size / 1e6)
 
 
-# The sampling-only cost: the render at this many times the bench's samples less the render at the bench's samples.
-SAMPLING_FACTOR = 4
-
-
 def ms_render_times(names, samples: int, resolution: int, repeats: int) -> list[dict]:
-    """Cycles render time of each preset with and without multiple scattering, both forms, on the sphere scene, at
-    ``samples`` and at ``SAMPLING_FACTOR`` times as many, in ``repeats`` rounds (each renders every material at both
-    counts, alternating SS, SS + MS, ...). ``<form>`` / ``<form>_ms``: the fastest whole render at ``samples`` (scene
-    sync, shader compilation, kernel set-up and sampling), ``<form>_ratio`` theirs. ``<form>_sampling`` /
-    ``<form>_ms_sampling``: the median over the rounds of the render at the larger count less the render at
-    ``samples``, the time of the samples between them alone (what shading costs: the set-up is the same in both and
-    cancels), and ``<form>_sampling_ratio`` the median of each round's ratio (a round's renders share the machine's
-    state, so slow drifts cancel too, and the median ignores a round that a hiccup disturbed). ``<form>_rounds`` /
-    ``<form>_sampling_rounds`` hold each round's ratio SS + MS over SS (their spread is the measurement's)."""
-    import bpy
-
+    """Cycles render time of each preset with and without multiple scattering, both forms, on the sphere scene
+    (``paired_render_times``: at ``samples`` and at ``SAMPLING_FACTOR`` times as many, in ``repeats`` rounds). Per
+    preset and form, ``compared``: with multiple scattering against without."""
     from ..nodes import material as lamina_material
-    from ..operators import blend_io
-    from ..operators.cycles_render import render_cycles
 
-    spec = ref_scenes.sphere_scene(resolution=resolution)
-    path = os.path.join(bpy.app.tempdir, "bench_ms.exr")
-    counts = (samples, SAMPLING_FACTOR * samples)
-    rows = []
-    for name in names:
+    def materials(name):
         data = presets.load(MODEL, name)
-        before = blend_io.snapshot()
-        try:
-            mats = {(form, ms): lamina_material.new_material(
-                        MODEL, model.params_from_dict({**data, "multiple_scattering": ms}), form)
-                    for form in ("nodes", "osl") for ms in (False, True)}
-            times = {(k, n): [] for k in mats for n in counts}
-            for _ in range(repeats):
-                for k, mat in mats.items():
-                    for n in counts:
-                        times[k, n].append(render_cycles(mat, spec, n, 0, path)[1])
-        finally:
-            blend_io.remove_new_data(before)
-        whole = {k: times[k, counts[0]] for k in mats}
-        sampling = {k: [b - a for a, b in zip(times[k, counts[0]], times[k, counts[1]])] for k in mats}
-        row = {"preset": name}
-        for form in ("nodes", "osl"):
-            for ms, suffix in ((False, ""), (True, "_ms")):
-                row[form + suffix] = min(whole[form, ms])
-                row[form + suffix + "_sampling"] = float(np.median(sampling[form, ms]))
-            row[form + "_ratio"] = row[form + "_ms"] / row[form]
-            row[form + "_rounds"] = [m / s for s, m in zip(whole[form, False], whole[form, True])]
-            row[form + "_sampling_rounds"] = [m / s for s, m in zip(sampling[form, False], sampling[form, True])
-                                              if s > 0.0]
-            rounds = row[form + "_sampling_rounds"]
-            row[form + "_sampling_ratio"] = float(np.median(rounds)) if rounds else float("nan")
-        rows.append(row)
-    return rows
+        return {(form, ms): lamina_material.new_material(
+                    MODEL, model.params_from_dict({**data, "multiple_scattering": ms}), form)
+                for form in ("nodes", "osl") for ms in (False, True)}
+
+    return [{"preset": r["preset"], **{form: compared(r, (form, True), (form, False)) for form in ("nodes", "osl")}}
+            for r in paired_render_times(names, materials, samples, resolution, repeats)]
 
 
 # Texture-driven materials whose energy budget follows one input (``nodes.spongecake.TexelEnergy``): label, layers
@@ -818,17 +779,11 @@ def ms_speed_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "median over the rounds; the ratio is the median of the rounds' ratios:", "",
               "| preset | node group SS s | SS + MS s | ratio | per round | OSL SS s | SS + MS s | ratio | per round |",
               "|---|---|---|---|---|---|---|---|---|"]
-    lines += [_speed_row(r, "_sampling") for r in rows]
+    lines += [_speed_row(r, "sampling") for r in rows]
     lines += ["", f"Baking multiple scattering into textures: **{per_mp:.2f} s per megapixel** ({what}; fastest of 2)."]
     return "\n".join(lines) + "\n"
 
 
 def _speed_row(r: dict, kind: str) -> str:
-    """One preset's row of ``ms_speed_markdown``: ``kind`` "" (whole renders) or "_sampling"."""
-    cells = [r["preset"]]
-    for form in ("nodes", "osl"):
-        ss, ms, rounds = r[form + kind], r[form + "_ms" + kind], r[form + kind + "_rounds"]
-        ratio = r[form + kind + "_ratio"]
-        spread = f"{min(rounds):.2f}–{max(rounds):.2f}" if rounds else "–"
-        cells += [f"{ss:.2f}", f"{ms:.2f}", f"{ratio:.2f}" if np.isfinite(ratio) else "–", spread]
-    return "| " + " | ".join(cells) + " |"
+    """One preset's row of ``ms_speed_markdown``: ``kind`` "" (whole renders) or "sampling"."""
+    return "| " + " | ".join([r["preset"]] + ratio_cells(r["nodes"], kind) + ratio_cells(r["osl"], kind)) + " |"

@@ -16,8 +16,9 @@ from ..reference import thin_coat as reference
 from ..reference import thin_coat_truth as truth
 from ..reference import vmf, warping
 from ..reference.frames import spherical
-from .common import (approximation_header, approximation_rows, driven_section, fastest_renders, mapping_section,
-                     pct, preset_render_times, preset_rows, reference_throughput, timed)
+from .common import (approximation_header, approximation_rows, driven_section, fastest_renders,
+                     fitted_speed_section, mapping_section, pct, preset_render_times, preset_rows,
+                     reference_throughput, timed)
 
 MODEL = model.ID
 # The grid: κ1, κ2 ∈ {10, 1e3, 1e6}, η ∈ {1.2, 1.5, 2}, without and with absorption.
@@ -316,11 +317,10 @@ def speed_markdown(samples: int, resolution: int) -> str:
     lines += ["", "### Node group : OSL : Principled coat", "",
               "Same scene and settings, each preset (default 2 bounces) against Blender's Principled BSDF with a "
               "coat of the same roughness and IOR.", "",
-              "| preset | node group s | OSL s | Principled coat s | node group : Principled | OSL : Principled | "
-              "fitted : analytic node group | fitted : analytic OSL |",
-              "|---|---|---|---|---|---|---|---|"]
+              "| preset | node group s | OSL s | Principled coat s | node group : Principled | OSL : Principled |",
+              "|---|---|---|---|---|---|"]
     for r in preset_render_times(MODEL, samples, resolution):
         lines.append(f"| {r['preset']} | {r['nodes']:.2f} | {r['osl']:.2f} | {r['principled']:.2f} | "
-                     f"{r['nodes'] / r['principled']:.2f} | {r['osl'] / r['principled']:.2f} | "
-                     f"{r['nodes fitted'] / r['nodes']:.2f} | {r['osl fitted'] / r['osl']:.2f} |")
+                     f"{r['nodes'] / r['principled']:.2f} | {r['osl'] / r['principled']:.2f} |")
+    lines += fitted_speed_section(MODEL, samples, resolution)
     return "\n".join(lines) + "\n"

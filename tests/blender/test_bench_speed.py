@@ -1,6 +1,7 @@
-"""The multiple-scattering speed bench: the sampling-only cost is each round's render at ``SAMPLING_FACTOR`` times the
-samples less its render at the bench's samples (the set-up and the round's drift cancel), the median over the rounds,
-per form, beside the whole render (``bench.spongecake.ms_render_times``)."""
+"""The speed benches that compare two materials (multiple scattering on against off, ``bench.spongecake.
+ms_render_times``; the fitted mapping against the analytic one, ``bench.common.fitted_speed_section``): the
+sampling-only cost is each round's render at ``SAMPLING_FACTOR`` times the samples less its render at the bench's
+samples (the set-up and the round's drift cancel), the median over the rounds, per form, beside the whole render."""
 import json
 
 import pytest
@@ -49,21 +50,22 @@ def test_the_sampling_cost_cancels_the_set_up_and_the_drift_and_the_whole_render
     assert {(c[0], c[1]) for c in calls} == {(f, m) for f in ("nodes", "osl") for m in (False, True)}
     between = 100 * (bench.SAMPLING_FACTOR - 1)
     for form in ("nodes", "osl"):
-        assert row[form] == pytest.approx(SETUP[form] + 1.0)  # the fastest whole render at 100 samples
-        assert row[form + "_sampling"] == pytest.approx(between * PER_SAMPLE[False])  # the hiccup's round ignored
-        assert row[form + "_ms_sampling"] == pytest.approx(between * PER_SAMPLE[True])
-        assert row[form + "_sampling_ratio"] == pytest.approx(1.3)
-        assert row[form + "_ratio"] < 1.3  # the set-up dilutes the whole render's ratio
-        assert len(row[form + "_sampling_rounds"]) == 3 and min(row[form + "_sampling_rounds"]) < 1.0  # the hiccup
+        c = row[form]
+        assert c["base"] == pytest.approx(SETUP[form] + 1.0)  # the fastest whole render at 100 samples
+        assert c["base_sampling"] == pytest.approx(between * PER_SAMPLE[False])  # the hiccup's round ignored
+        assert c["sampling"] == pytest.approx(between * PER_SAMPLE[True])
+        assert c["sampling_ratio"] == pytest.approx(1.3)
+        assert c["ratio"] < 1.3  # the set-up dilutes the whole render's ratio
+        assert len(c["sampling_rounds"]) == 3 and min(c["sampling_rounds"]) < 1.0  # the hiccup
     assert blend_io.snapshot() == before  # the bench's materials are removed
 
 
 def test_the_speed_page_shows_both_tables(monkeypatch):
-    row = {"preset": "fabric", "nodes": 2.0, "nodes_ms": 3.0, "nodes_ratio": 1.5, "nodes_sampling": 1.0,
-           "nodes_ms_sampling": 1.4, "nodes_sampling_ratio": 1.45, "nodes_rounds": [1.4, 1.6],
-           "nodes_sampling_rounds": [1.3, 1.5], "osl": 4.0, "osl_ms": 5.0, "osl_ratio": 1.25, "osl_sampling": 2.0,
-           "osl_ms_sampling": 2.5, "osl_sampling_ratio": float("nan"), "osl_rounds": [1.2, 1.3],
-           "osl_sampling_rounds": []}
+    row = {"preset": "fabric",
+           "nodes": {"base": 2.0, "other": 3.0, "ratio": 1.5, "rounds": [1.4, 1.6], "base_sampling": 1.0,
+                     "sampling": 1.4, "sampling_ratio": 1.45, "sampling_rounds": [1.3, 1.5]},
+           "osl": {"base": 4.0, "other": 5.0, "ratio": 1.25, "rounds": [1.2, 1.3], "base_sampling": 2.0,
+                   "sampling": 2.5, "sampling_ratio": float("nan"), "sampling_rounds": []}}
     monkeypatch.setattr(bench, "ms_render_times", lambda *a: [row])
     monkeypatch.setattr(bench, "bake_throughput", lambda size: ("fake", 1.0))
     page = bench.ms_speed_markdown(bench.MsSizes(), 64, 192)
@@ -92,3 +94,28 @@ def test_fastest_renders_render_in_rounds_so_a_drift_touches_every_material_alik
     (row,) = common.fastest_renders(["x"], materials_of, samples=4, resolution=8, repeats=3)
     assert calls == ["bench a", "bench b"] * 3
     assert row["b"] - row["a"] == pytest.approx(0.5)  # the first round's renders, one after the other
+
+
+def test_the_fitted_mapping_is_timed_against_the_analytic_one_by_sampling_alone(monkeypatch):
+    """Issue 14's cost goal compares what shading costs: an OSL shader that compiles longer with its tables must not
+    count, a fitted mapping that shades slower must."""
+    from addon.bench import common
+
+    calls = []
+    setup = {"analytic": 1.0, "fitted": 3.0}  # the fitted shader compiles longer
+    per_sample = {"analytic": 0.010, "fitted": 0.009}  # and shades faster
+
+    def render(mat, spec, samples, seed, path):
+        mapping = json.loads(mat["lamina"])["mapping"]
+        calls.append((material.form_of(mat), mapping, samples))
+        return None, setup[mapping] + per_sample[mapping] * samples
+
+    monkeypatch.setattr("addon.operators.cycles_render.render_cycles", render)
+    monkeypatch.setattr(common.presets, "names", lambda model_id: ["plastic"])
+    before = blend_io.snapshot()
+    lines = common.fitted_speed_section("spongecake", samples=100, resolution=8, repeats=2)
+    assert len(calls) == 2 * 2 * 2 * 2  # rounds × forms × mappings × sample counts
+    assert {c[:2] for c in calls} == {(f, m) for f in ("nodes", "osl") for m in ("analytic", "fitted")}
+    row = next(line for line in lines if line.startswith("| plastic"))
+    assert row == "| plastic | 3.00 | 2.70 | 0.90 | 0.90–0.90 | 3.00 | 2.70 | 0.90 | 0.90–0.90 |"
+    assert blend_io.snapshot() == before
