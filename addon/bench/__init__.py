@@ -8,7 +8,8 @@ has (ground truths, networks, geometric terms). Speed: reference throughput, and
 
 Every model of the registry with a module here (``bench/<model id>.py``) contributes its sections through
 ``accuracy(sizes)`` and ``speed(sizes)`` (``Sizes``), in registry order; Fit to budget's section (``budget``), which
-spans every model, ends docs/benchmarks.md; docs/images/overview.png shows every model's presets.
+spans every model, ends docs/benchmarks.md, and what more closures would buy the fitted mapping (``fit_ceiling``)
+ends docs/accuracy.md; docs/images/overview.png shows every model's presets.
 """
 from __future__ import annotations
 
@@ -115,7 +116,7 @@ def run(out_dir: str, sizes: Sizes = Sizes(), models: list[str] | None = None, p
     documents of ``parts`` are measured again and replaced in the existing documents (the overview picture is left as
     it is)."""
     from ..operators.compare_run import write_text_atomic
-    from . import budget  # not at the top: ``python -m addon.bench.budget`` imports this package first
+    from . import budget, fit_ceiling  # not at the top: ``python -m addon.bench.<module>`` imports this package first
 
     os.makedirs(out_dir, exist_ok=True)
     if models is None:
@@ -130,6 +131,8 @@ def run(out_dir: str, sizes: Sizes = Sizes(), models: list[str] | None = None, p
             text = header + "".join(marked(b.MODEL, getattr(b, section)(sizes)) for b in benches)
             if section == "speed":  # Fit to budget chooses among every model's configurations
                 text += marked(budget.SECTION, budget.speed(sizes))
+            else:  # what more closures would buy the fitted mapping, over the models that have one
+                text += marked(fit_ceiling.SECTION, fit_ceiling.accuracy(sizes))
         else:
             with open(path, encoding="utf-8") as f:
                 text = f.read()

@@ -539,11 +539,13 @@ def fit(backend_of, ref_eval, ref_albedo, form: str, damping: float = 1.0, toons
 
 @one_blas_thread()
 def fit_variants(backend_of, ref_eval, ref_albedo, form: str, variants, groups=None, extras=None,
-                 atoms=None) -> list[Fit]:
+                 atoms=None, spare: int = 0) -> list[Fit]:
     """``fit`` for each (damping, toons) of ``variants``, in that order, on one quadrature: the reference, the
     analytic closures and the whole dictionary are evaluated once (``_knot_views``), the normal equations once per
     weighting, and a variant without the Toon lobes leaves their columns out of its greedy choice. The same fits as
-    one ``fit`` each, at a fraction of the time."""
+    one ``fit`` each, at a fraction of the time. ``spare``: closures the fit may render beyond the analytic
+    mapping's count, and as many more extra closures (a measurement of what a larger render cost would buy,
+    ``bench.fit_ceiling``; materials are fitted with none)."""
     analytic = backend_of(np.array([[0.0, 0.0, 1.0]]))
     closures = _fitted_closures(analytic.closures)
     groups = atom_groups(backend_of) if groups is None else tuple(groups)
@@ -560,7 +562,7 @@ def fit_variants(backend_of, ref_eval, ref_albedo, form: str, variants, groups=N
     views = [_knot_views(backend_of, ref_eval, ref_albedo, mu, groups, extras) for mu in view_cosines()]
     toon = np.array([(kind, kw) in TOONS for kind, kw in extras], dtype=bool)
     analytic_use = np.arange(n_analytic + len(extras)) < n_analytic
-    budget = analytic.closure_count() - len({kind for kind, _, _ in analytic.closures if kind in FIXED})
+    budget = analytic.closure_count() - len({kind for kind, _, _ in analytic.closures if kind in FIXED}) + spare
     systems_of, fits = {}, []
     for damping, toons in variants:
         if damping not in systems_of:
@@ -574,7 +576,8 @@ def fit_variants(backend_of, ref_eval, ref_albedo, form: str, variants, groups=N
             best = _solve_all(stacked, use)
             error = _error(systems, best)
         else:
-            use, best, error = _chosen(systems, stacked, analytic_use, n_analytic, budget, toons or ~toon)
+            use, best, error = _chosen(systems, stacked, analytic_use, n_analytic, budget, toons or ~toon,
+                                       MAX_EXTRAS + spare)
         x = np.transpose(np.stack(best), (2, 0, 1))  # (A + E, K, 3)
         chosen = np.flatnonzero(use[n_analytic:])
         fits.append(Fit(x[:n_analytic], tuple(extras[e] for e in chosen), x[n_analytic + chosen], error_analytic,
@@ -588,15 +591,15 @@ def _rendered(use: np.ndarray, weights) -> np.ndarray:
     return use & (np.max([x.max(axis=0) for x in weights], axis=0) > 0.0)
 
 
-def _chosen(systems, stacked, use, n_analytic: int, budget: int, allowed=True):
+def _chosen(systems, stacked, use, n_analytic: int, budget: int, allowed=True, moves: int = MAX_EXTRAS):
     """(use, weights, error): greedy moves from the analytic atoms, each the best of adding one extra closure
     (of those ``allowed``, a mask over the extras) while the rendered closures stay within ``budget``, or putting
     one in place of a rendered atom; a move is kept only if it lowers the error by ``EXTRA_GAIN`` and ``MIN_GAIN``,
-    at most ``MAX_EXTRAS`` of them."""
+    at most ``moves`` of them."""
     best = _solve_all(stacked, use)
     use = _rendered(use, best)
     error = _error(systems, best)
-    for _ in range(MAX_EXTRAS):
+    for _ in range(moves):
         trials = []
         for e in np.flatnonzero(~use[n_analytic:] & allowed) + n_analytic:
             added = use.copy()

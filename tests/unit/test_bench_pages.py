@@ -16,3 +16,32 @@ def test_a_model_new_since_the_last_whole_run_is_appended():
     new = bench.splice(page, "b", "# B\nnew b", "*alone*")
     assert new.startswith(page.rstrip("\n")) and new.count("<!-- lamina-bench b -->") == 1
     assert "new b" in new and "*alone*" in new and "old a" in new
+
+
+def test_the_closure_budget_section_lists_only_presets_whose_fit_misses_a_goal(monkeypatch):
+    """``bench.fit_ceiling`` refits only where the shipped fitted mapping misses one of issue 14's goals (a backlit
+    scene counts only where the reference reaches the threshold); its rows say n/a where a scene does not count."""
+    from addon.bench import fit_ceiling
+    from addon.nodes import choice
+
+    fine = {"sphere": 0.05, "plane": 0.05, "backlit": 0.9, "furnace": 0.01}  # backlit black: does not count
+    means = {"sphere": 0.01, "plane": 0.01, "backlit": 0.0, "furnace": 0.1}
+    missed = {**fine, "plane": 0.3}
+
+    def choose(model_id, p, form, mapping):
+        errors = missed if model_id == "spongecake" and p.to_dict() == spongecake_sheen else fine
+        return choice.Choice("fitted", None, {"fitted": errors}, means=means)
+
+    from addon import presets
+    from addon.models import spongecake
+
+    spongecake_sheen = spongecake.params_from_dict(presets.load("spongecake", "sheen")).to_dict()
+    monkeypatch.setattr(choice, "choose", choose)
+    monkeypatch.setattr(fit_ceiling, "ceiling_rows", lambda model_id, p, resolution: [
+        {"spare": n, "closures": 2 + n, "fit_error": 0.4 - 0.1 * n, "errors": missed, "means": means}
+        for n in fit_ceiling.SPARE])
+    section = fit_ceiling.accuracy(bench.Sizes(resolution=8))
+    rows = [line for line in section.splitlines() if line.startswith("| spongecake") or line.startswith("| thin")]
+    assert rows == [f"| spongecake | sheen | {n} | {2 + n} | {40 - 10 * n:.1f}% | 5.0% | 30.0% | n/a | 1.0% |"
+                    for n in fit_ceiling.SPARE]
+    assert fit_ceiling.misses_a_goal(missed, means) and not fit_ceiling.misses_a_goal(fine, means)

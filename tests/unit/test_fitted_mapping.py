@@ -153,6 +153,21 @@ def test_the_variants_fitted_together_are_the_fits_made_one_by_one(monkeypatch):
         assert a.error_fitted == pytest.approx(b.error_fitted, rel=1e-9)
 
 
+def test_spare_closures_may_render_beyond_the_analytic_count_and_never_fit_worse(monkeypatch):
+    """``bench.fit_ceiling`` measures what a larger closure budget would buy: with spare closures the greedy fit may
+    keep the material's closures beside the extras (the leaf's four and more), and its error can only fall."""
+    monkeypatch.setattr(fitted, "KNOTS", 5)
+    monkeypatch.setattr(fitted, "AZIMUTHS", 2)
+    p = _preset(spongecake, "leaf")
+    problem = choice._problem(spongecake.ID, p, "osl")
+    analytic_closures = budget.shader_size(spongecake.ID, p, "osl")[1]
+    shipped, spared = (fitted.fit_variants(*problem, "osl", [(1.0, True)], spare=n)[0] for n in (0, 2))
+    assert budget.shader_size(spongecake.ID, p, "osl", shipped)[1] <= analytic_closures
+    assert budget.shader_size(spongecake.ID, p, "osl", spared)[1] <= analytic_closures + 2
+    assert len(spared.extras) > len(shipped.extras)
+    assert spared.error_fitted < shipped.error_fitted
+
+
 def test_every_variant_is_fitted_at_once_and_cached_each_on_its_own(monkeypatch):
     p = _preset(thin_coat, "rough_over_smooth")
     calls = []
