@@ -365,6 +365,7 @@ class OslBackend:
         self.lines: list[str] = []
         self.closures: list[str] = []
         self.lamberts: dict[str, list[str]] = {}  # closure call -> the colours summed into it (``_lambert``)
+        self.tables: list[str] = []  # constant arrays, declared as parameters (``ramp``)
         self._count = 0
 
     def input(self, name: str, kind: str):
@@ -461,12 +462,14 @@ class OslBackend:
         return body(self, *args)
 
     def ramp(self, values, x):
-        """``NumpyBackend.ramp``: a constant array of colours, interpolated linearly."""
+        """``NumpyBackend.ramp``: a constant array of colours, interpolated linearly. The array is a shader parameter
+        (no socket: ``osl.parse_params``), which OSL keeps as a constant; a local array would be filled at every
+        shading point."""
         values = np.asarray(values, dtype=np.float64)
         self._count += 1
         name, last = f"table{self._count}", len(values) - 1
         entries = ", ".join(_osl(tuple(v)).code for v in values)
-        self.lines.append(f"color {name}[{len(values)}] = {{{entries}}};")
+        self.tables.append(f"color {name}[{len(values)}] = {{{entries}}}")
         t = self._let(OslValue(f"clamp({_osl(x).code}, 0.0, 1.0) * {_num(last)}", "float"))
         i = self._let(OslValue(f"min((int)floor({t.code}), {last - 1})", "int"))
         return self._let(OslValue(f"mix({name}[{i.code}], {name}[{i.code} + 1], {t.code} - {i.code})", "color"))
@@ -557,8 +560,8 @@ class OslBackend:
         self._closure(color, f"diffuse_toon(N, {_osl(size).code}, {_osl(smooth).code})")
 
     def source(self, shader_name: str, header: str) -> str:
-        params = ",\n    ".join(f"{_osl_type(kind)} {osl_identifier(name)} = {_osl_default(kind, d)}"
-                                 for name, kind, d in self.params)
+        params = ",\n    ".join([f"{_osl_type(kind)} {osl_identifier(name)} = {_osl_default(kind, d)}"
+                                  for name, kind, d in self.params] + self.tables)
         body = "\n    ".join(self.lines)
         lamberts = [f"({' + '.join(colors)}) * {call}" for call, colors in self.lamberts.items()]
         bsdf = " +\n        ".join(self.closures + lamberts) or "0"

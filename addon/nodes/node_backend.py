@@ -8,7 +8,7 @@ import bpy
 from .expr import (BULK_INPUT, MAX_CONDUCTOR_WEIGHT, MAX_MIX_WEIGHT, METAL_MIN_RATIO, MIN_COS, MIN_LOG, MIN_TANGENT,
                    lobe_fresnel, schlick_at_view)
 
-GENERATOR_VERSION = 9  # bump when generated shaders change, so cached groups are not reused
+GENERATOR_VERSION = 10  # bump when generated shaders change, so cached groups are not reused
 COLUMN = 190
 ROW = 150
 

@@ -54,10 +54,12 @@ def _compile(source: str) -> str:
 
 
 def parse_params(oso: str) -> list[OsoParam]:
+    """The shader's inputs and outputs, those that get sockets: array parameters (the fitted mapping's tables) keep
+    their defaults, which OSL treats as constants."""
     out = []
     for line in oso.splitlines():
         fields = line.split("\t")
-        if fields[0] not in ("param", "oparam"):
+        if fields[0] not in ("param", "oparam") or "[" in fields[1]:
             continue
         type_, name = fields[1], fields[2]
         default = tuple(float(x) for x in fields[3].split()) if len(fields) > 3 and type_ != "closure color" else ()

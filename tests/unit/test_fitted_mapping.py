@@ -232,8 +232,9 @@ def test_bad_materials_give_finite_non_negative_closures_and_a_message(name):
 
 
 def test_both_forms_get_the_tables():
-    """The OSL source carries a constant array per table (16 colours); the numpy backend interpolates them, in
-    √cos θo from the first knot's view to normal view."""
+    """The OSL source carries a constant array per table (16 colours), declared among the shader's parameters (OSL
+    keeps a parameter nothing sets as a constant; a local array is filled at every shading point); the numpy backend
+    interpolates them, in √cos θo from the first knot's view to normal view."""
     p = _preset(thin_coat, "amber_lacquer")
     fit = choice.choose(thin_coat.ID, p, "osl", "fitted").fit
     b = OslBackend([(s.name, s.kind, s.param.default) for s in thin_coat_sockets(p)])
@@ -241,6 +242,8 @@ def test_both_forms_get_the_tables():
     source = b.source("t", "//")
     rendered = sum(scales.max() > 0.0 for scales in fit.scales)  # an atom set to zero everywhere is left out
     assert source.count(f"[{fitted.KNOTS}] = {{") == rendered + len(fit.extras)
+    parameters, body = source.split("output closure color BSDF = 0)")
+    assert body.count(f"[{fitted.KNOTS}] = {{") == 0
     mu = fitted.view_cosines()
     wo = np.stack([np.sqrt(1.0 - mu * mu), np.zeros_like(mu), mu], axis=1)
     n = NumpyBackend(np.concatenate([wo, [[1.0, 0.0, 0.0]]]), {}, "osl")
