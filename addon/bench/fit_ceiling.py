@@ -29,7 +29,7 @@ def misses_a_goal(errors: dict, means: dict) -> bool:
 def ceiling_rows(model_id: str, p, resolution: int) -> list[dict]:
     """Per ``SPARE`` count: the closures the fit renders, its error in its own quadrature, and the comparison
     scenes' errors ({scene: rel RMSE}) with the reference's means."""
-    problem = choice._problem(model_id, p, FORM)
+    problem = choice.fit_problem(model_id, p, FORM)
     rows = []
     for spare in SPARE:
         fits = fitted.fit_variants(*problem, FORM, [(v.damping, v.toons) for v in choice.VARIANTS], spare=spare)

@@ -42,7 +42,7 @@ def ground_truth_error(p, n_dirs: int = 4, n_paths: int = 20000, seed: int = 1) 
 
 def accuracy(sizes) -> str:
     """SpongeCake's sections of docs/accuracy.md (``bench.Sizes``)."""
-    out = accuracy_markdown(sizes.resolution) + sheen_alternative(sizes.timing_samples, sizes.resolution)
+    out = accuracy_markdown(sizes.resolution) + sheen_alternative(sizes.resolution)
     return out + (ms_accuracy_markdown(sizes.ms, sizes.samples, sizes.resolution) if sizes.ms is not None else "")
 
 
@@ -106,60 +106,54 @@ def benchmarks_markdown(samples: int, resolution: int) -> str:
     return "\n".join(lines) + "\n"
 
 
-def sheen_alternative(samples: int, resolution: int) -> str:
+def sheen_alternative(resolution: int) -> str:
     """Fibers along the normal: Cycles' Microfiber Sheen BSDF (a fit to such fibers, with multiple scattering)
-    against the reference's single scattering, at the best constant scale, next to Lamina's Lambert lobe."""
-    import bpy
-
-    from ..nodes import material as lamina_material
-    from ..operators import blend_io
-    from ..operators.cycles_render import render_cycles
+    against the reference's single scattering, as Cycles renders it (``closures_np.sheen``, checked against Cycles
+    in tests/blender/test_cycles_facts.py): at the best constant scale, and alone with an RGB table over the view
+    (``fitted.fit`` with the sheen as its only closure), next to Lamina's analytic and fitted mappings."""
+    from ..nodes import choice, closures_np, fitted, predicted_image
 
     lines = ["", "## Fibers along the normal: Cycles' Sheen closure as an alternative", "",
              "Cycles' Microfiber Sheen BSDF is a fit to fibers standing along the normal, so it was measured as "
-             "an alternative for the `fiber-along-normal` lobe: the best constant scale k is fitted per row "
-             "(the closure's own normalisation differs from single scattering). Relative RMSE in Cycles, "
-             f"{samples} samples.", "",
-             "| layer (fiber α = 0.2 along n) | sheen roughness | k | sphere | plane | Lamina node group sphere | plane |",
+             "an alternative for the `fiber-along-normal` lobe, as Cycles renders it (`nodes.closures_np.sheen`, "
+             "Cycles' own table; no sampling noise): at the best constant scale k per row (the closure's own "
+             "normalisation differs from single scattering), and alone with an RGB weight table over the view as the "
+             "fitted mapping carries one (`nodes.fitted`, the sheen its only closure). Lamina: the OSL form's "
+             "analytic and fitted mappings of the same layer.", "",
+             "| layer (fiber α = 0.2 along n) | sheen roughness | k | sphere | plane | view table: sphere | plane |",
              "|---|---|---|---|---|---|---|"]
-    specs = [ref_scenes.sphere_scene(resolution=resolution), ref_scenes.plane_scene(resolution=(resolution, resolution // 2))]
-    tmp = os.path.join(bpy.app.tempdir, "bench_sheen.exr")
+    specs = [ref_scenes.sphere_scene(resolution=resolution),
+             ref_scenes.plane_scene(resolution=(resolution, resolution // 2))]
+    masks = [ref_scenes.scene_mask(s) for s in specs]
+    lamina = []
     for thickness in (0.5, 5.0):
         p = model.params_from_dict(_fiber_along_n(thickness))
         refs = [ref_scenes.reference_image(s, lambda wi, wo: reference.eval(p, wi, wo)) for s in specs]
-        masks = [ref_scenes.scene_mask(s) for s in specs]
-        before = blend_io.snapshot()
-        try:
-            lamina = [render_cycles(lamina_material.new_material(MODEL, p, "nodes"), s, samples, 0, tmp)[0] for s in specs]
-            ours = [metrics.rel_rmse(img, r, m) for img, r, m in zip(lamina, refs, masks)]
-            for roughness in (0.2, 0.45, 0.7):
-                mat = _sheen_material(roughness)
-                imgs = [render_cycles(mat, s, samples, 0, tmp)[0] for s in specs]
-                k = sum((i[m] * r[m]).sum() for i, r, m in zip(imgs, refs, masks)) / \
-                    sum((i[m] ** 2).sum() for i, m in zip(imgs, masks))
-                errs = [metrics.rel_rmse(k * i, r, m) for i, r, m in zip(imgs, refs, masks)]
-                lines.append(f"| Tρ = {thickness} | {roughness} | {k:.3f} | {pct(errs[0])} | {pct(errs[1])} | "
-                             f"{pct(ours[0])} | {pct(ours[1])} |")
-        finally:
-            blend_io.remove_new_data(before)
+
+        def errors(images):
+            return [pct(metrics.rel_rmse(i, r, m)) for i, r, m in zip(images, refs, masks)]
+
+        problem = choice.fit_problem(MODEL, p, "osl")
+        atoms = [False] * (1 + max(fitted.atom_groups(problem[0])))
+        for roughness in (0.2, 0.45, 0.7):
+            imgs = [ref_scenes.reference_image(s, lambda wi, wo: closures_np.sheen(wi, wo, roughness)) for s in specs]
+            k = sum((i[m] * r[m]).sum() for i, r, m in zip(imgs, refs, masks)) / \
+                sum((i[m] ** 2).sum() for i, m in zip(imgs, masks))
+            alone = fitted.fit(*problem, "osl", extras=[("sheen", {"roughness": roughness})], atoms=atoms)
+            tabled = errors([predicted_image(MODEL, p, "osl", s, alone) for s in specs])
+            lines.append(f"| Tρ = {thickness} | {roughness} | {k:.3f} | {' | '.join(errors([k * i for i in imgs]))} | "
+                         f"{' | '.join(tabled)} |")
+        ours = choice.choose(MODEL, p, "osl", "fitted").fit
+        lamina.append(f"| Tρ = {thickness} | {' | '.join(errors([predicted_image(MODEL, p, 'osl', s) for s in specs]))}"
+                      f" | {' | '.join(errors([predicted_image(MODEL, p, 'osl', s, ours) for s in specs]))} |")
+    lines += ["", "| layer | Lamina analytic: sphere | plane | Lamina fitted: sphere | plane |", "|---|---|---|---|---|",
+              *lamina]
     return "\n".join(lines) + "\n"
 
 
 def _fiber_along_n(thickness: float) -> dict:
     return {"layers": [{"type": "fiber", "roughness": 0.2, "thickness": thickness, "albedo": [1, 1, 1],
                         "orientation": [0, 0, 1]}]}
-
-
-def _sheen_material(roughness: float):
-    from ..nodes.material import empty_material
-
-    mat, tree, out = empty_material("Lamina bench sheen")
-    sheen = tree.nodes.new("ShaderNodeBsdfSheen")
-    sheen.distribution = "MICROFIBER"
-    sheen.inputs["Roughness"].default_value = roughness
-    sheen.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
-    tree.links.new(sheen.outputs[0], out.inputs["Surface"])
-    return mat
 
 
 # ------------------------------------------------------------------------------------ multiple scattering

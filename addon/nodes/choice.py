@@ -101,9 +101,9 @@ def fit_for(model_id: str, p, form: str, variant: Variant = VARIANTS[0], driven:
     if found is not None:
         return found
     if driven is None:
-        result = fitted.fit(*_problem(model_id, p, form), form, variant.damping, variant.toons)
+        result = fitted.fit(*fit_problem(model_id, p, form), form, variant.damping, variant.toons)
     else:
-        problems = [_problem(model_id, at(model_id, p, driven, j), form) for j in range(len(driven.values))]
+        problems = [fit_problem(model_id, at(model_id, p, driven, j), form) for j in range(len(driven.values))]
         result = fitted.fit_driven(problems, driven, form, variant.damping, variant.toons, progress)
     return _stored(key, result)
 
@@ -115,7 +115,7 @@ def fits_for(model_id: str, p, form: str) -> dict:
     found = {v: _cached(key) for v, key in keys.items()}
     missing = [v for v, f in found.items() if f is None]
     if missing:
-        made = fitted.fit_variants(*_problem(model_id, p, form), form, [(v.damping, v.toons) for v in missing])
+        made = fitted.fit_variants(*fit_problem(model_id, p, form), form, [(v.damping, v.toons) for v in missing])
         found.update({v: _stored(keys[v], f) for v, f in zip(missing, made)})
     return found
 
@@ -124,7 +124,7 @@ def _variant_key(model_id: str, p, form: str, variant: Variant, driven: fitted.D
     return f"{fit_key(model_id, p, form, driven)}-{variant.damping:g}{'-toons' * variant.toons}"
 
 
-def _problem(model_id: str, q, form: str):
+def fit_problem(model_id: str, q, form: str):
     """(backend_of, ref_eval, ref_albedo) of ``q`` in ``form``: what ``fitted.fit`` fits."""
     from . import _backend
 

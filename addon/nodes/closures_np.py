@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 
 import numpy as np
 
@@ -200,6 +201,70 @@ def velvet(wi, wo, sigma):
     g = np.minimum(1.0, np.minimum(2.0 * ratio * ci, 2.0 * ratio * co))
     f = np.where(ok, d * g / (4.0 * ci * co), 0.0)
     return np.repeat(f[:, None], 3, axis=1)
+
+
+# Cycles' Microfiber sheen table (``table_sheen_ltc``, intern/cycles/scene/shader.tables, Apache-2.0; the bytes of the
+# bpy 4.2 and 5.0 binaries, tests/blender/test_cycles_facts.py): the LTC's a, b and the albedo R over (roughness
+# rows, cos θo columns), 32 x 32 each, from Zeltner et al. 2022.
+SHEEN_TABLE = os.path.join(os.path.dirname(__file__), "sheen_ltc.npy")
+SHEEN_MIN_ROUGHNESS = 1e-3  # Cycles clamps a sheen closure's roughness to [1e-3, 1] at setup
+
+
+@functools.cache
+def sheen_table() -> np.ndarray:
+    """(3, 32, 32) float32: a, b, R, each over (roughness, cos θo) (``SHEEN_TABLE``)."""
+    return np.load(SHEEN_TABLE)
+
+
+def table_2d(table, x, y):
+    """Cycles' ``lookup_table_read_2D``: ``table`` (rows over y, columns over x, both on [0, 1] uniformly) read
+    bilinearly at x, y (clamped to [0, 1])."""
+    ny, nx = table.shape
+
+    def cell(v, size):
+        f = np.clip(v, 0.0, 1.0) * (size - 1)
+        i = np.minimum(f.astype(int), size - 1)
+        return i, np.minimum(i + 1, size - 1), f - i
+
+    ix, jx, tx = cell(np.asarray(x, dtype=float), nx)
+    iy, jy, ty = cell(np.asarray(y, dtype=float), ny)
+    table = table.astype(np.float64)
+
+    def row(r):
+        return (1.0 - tx) * table[r, ix] + tx * table[r, jx]
+
+    return (1.0 - ty) * row(iy) + ty * row(jy)
+
+
+def sheen_transform(cos_o, roughness):
+    """The LTC's a, b and the albedo R that Cycles reads at closure setup for views of cosine ``cos_o``."""
+    r = np.clip(roughness, SHEEN_MIN_ROUGHNESS, 1.0)
+    return tuple(table_2d(plane, cos_o, r) for plane in sheen_table())
+
+
+def sheen(wi, wo, roughness):
+    """Cycles' Microfiber sheen (Sheen BSDF node, distribution Microfiber; OSL ``sheen``) around z (kernel
+    closure/bsdf_sheen.h, the same in 4.2 and 5.0), as a BSDF: Zeltner et al. 2022's linearly transformed cosine,
+    f cos θi = R · z a² / (π ((a x + b z)² + (a y)² + z²)²), (x, y, z) the light in the frame whose x axis is the
+    view's azimuth, a, b, R read from ``sheen_table`` at (cos θo, roughness). The cosine is divided out; a view
+    along the normal takes x along the frame's first axis (Cycles' frame is undefined there)."""
+    n = len(wi)
+    a, b, albedo = sheen_transform(wo[:, 2], np.broadcast_to(np.asarray(roughness, dtype=float), (n,)))
+    azimuth = wo * np.array([1.0, 1.0, 0.0])
+    length = np.linalg.norm(azimuth, axis=1, keepdims=True)
+    t = np.where(length > 1e-12, azimuth / np.maximum(length, 1e-300), np.array([1.0, 0.0, 0.0]))
+    x, y, z = _dot(wi, t), wi[:, 0] * -t[:, 1] + wi[:, 1] * t[:, 0], wi[:, 2]
+    ok = (z > 0) & (wo[:, 2] > 0)
+    len_sqr = (a * x + b * z) ** 2 + (a * y) ** 2 + z * z
+    f = np.where(ok, albedo * (a / np.where(ok, len_sqr, 1.0)) ** 2 / np.pi, 0.0)
+    return np.repeat(f[:, None], 3, axis=1)
+
+
+def sheen_albedo(wo, roughness):
+    """The sheen closure's directional albedo: R exactly (the transform keeps z, so the LTC integrates to 1 over
+    the upper hemisphere)."""
+    albedo = sheen_transform(wo[:, 2], np.broadcast_to(np.asarray(roughness, dtype=float), (len(wo),)))[2]
+    return np.repeat(np.where(wo[:, 2] > 0, albedo, 0.0)[:, None], 3, axis=1)
 
 
 TOON_MIN_SIZE = 1e-5  # Cycles clamps a toon closure's Size to [1e-5, 1] at setup
@@ -528,6 +593,7 @@ EVAL = {
     "translucent": translucent,
     "transparent": transparent,
     "velvet": velvet,
+    "sheen": sheen,
     "glossy_toon": glossy_toon,
     "diffuse_toon": diffuse_toon,
     "conductor": conductor,
@@ -542,6 +608,7 @@ ALBEDO = {
     "beckmann": beckmann_reflection_albedo,
     "beckmann_refraction": beckmann_refraction_albedo,
     "ggx_conductor": ggx_conductor_albedo,
+    "sheen": sheen_albedo,
 }
 # And GGX reflection closures of any sharpness (``ggx_albedo``), translucency (∫ cos θi / π below = 1) and the
 # transparent closure (no BSDF value: ``NumpyBackend.transparency`` counts it), where a caller asks for them

@@ -196,6 +196,10 @@ class NumpyBackend(NumpyMath):
         """Cycles' Ashikhmin velvet around the shading normal (``closures_np.velvet``)."""
         self._add("velvet", color, sigma=sigma)
 
+    def sheen(self, color, roughness):
+        """Cycles' Microfiber sheen around the shading normal (``closures_np.sheen``)."""
+        self._add("sheen", color, roughness=roughness)
+
     def glossy_toon(self, color, size, smooth):
         """Cycles' glossy Toon BSDF around the shading normal (``closures_np.glossy_toon``)."""
         self._add("glossy_toon", color, size=size, smooth=smooth)

@@ -5,13 +5,19 @@
   albedo of 1 (transparency) instead of its integral. Hence transmission lobes are not mapped onto it.
 * Microfacet α above 1 is clamped to 1, so fibers along the normal (GGX with α = 1/α) cannot be expressed.
 * Anisotropic refraction uses α_x only.
+* Microfiber sheen (OSL ``sheen``, the Sheen BSDF node's default distribution) is Zeltner et al.'s LTC read from
+  Cycles' own table, which Lamina ships as data: ``closures_np.sheen`` renders as Cycles does.
 """
+import mmap
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
 from addon.nodes import closures_np  # noqa: E402
+from addon.nodes.material import empty_material  # noqa: E402
 from addon.operators.cycles_render import render_cycles  # noqa: E402
 from addon.reference import metrics  # noqa: E402
 from addon.reference import scenes as S  # noqa: E402
@@ -62,3 +68,34 @@ def test_microfacet_alpha_is_clamped_to_one():
 def test_anisotropic_refraction_uses_alpha_x_only():
     mat = closure_material('microfacet("ggx", N, LaminaTangent, 0.1, 1.0, 1.0, 1)')
     assert _rel(mat, S.backlit_scene(resolution=(32, 16)), _spongecake_like_transmission(0.1))[0] < 0.01
+
+
+def _bpy_binary() -> Path:
+    """The bpy module's shared library (``bpy.__file__`` is Blender's Python package bpy/<version>/scripts/modules/bpy
+    inside the wheel's folder)."""
+    return next(Path(bpy.__file__).parents[4].glob("__init__*.so"))
+
+
+def test_the_shipped_sheen_table_is_the_one_in_this_blender():
+    with open(_bpy_binary(), "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as binary:
+        assert binary.find(closures_np.sheen_table().astype(np.float32).tobytes()) >= 0
+
+
+def _sheen_node_material(roughness):
+    mat, tree, out = empty_material("fact")
+    node = tree.nodes.new("ShaderNodeBsdfSheen")
+    node.distribution = "MICROFIBER"
+    node.inputs["Roughness"].default_value = roughness
+    node.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    tree.links.new(node.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+@pytest.mark.parametrize("roughness", [0.3, 1.0])
+@pytest.mark.parametrize("form", ["osl", "nodes"])
+def test_microfiber_sheen_renders_its_ltc(roughness, form):
+    mat = closure_material(f"sheen(N, {roughness})") if form == "osl" else _sheen_node_material(roughness)
+    scenes = S.sphere_scene(resolution=32), S.plane_scene(resolution=(32, 16)), S.furnace_scene(resolution=(16, 8))
+    for spec in scenes:
+        err, rendered, predicted = _rel(mat, spec, lambda wi, wo: closures_np.sheen(wi, wo, roughness))
+        assert err < 0.02, f"{spec.name}: {err:.4f} (mean {rendered:.4g} against {predicted:.4g})"

@@ -190,6 +190,21 @@ def test_blender_4_2_sampling_leak_only_for_a_normal_off_the_shading_normal():
     assert np.all(b.sampling_leak_blender42() == 0.0)
 
 
+@pytest.mark.parametrize("roughness", [0.0, 0.3, 1.0])
+def test_microfiber_sheen_integrates_to_its_tabulated_albedo_and_stays_finite(roughness):
+    """closures_np.sheen: the LTC integrates to 1 over the upper hemisphere, so the directional albedo is the
+    table's R (exact for the fit's albedo rows); finite and non-negative at grazing and normal views."""
+    from addon.reference.scenes import directional_albedo
+    views = np.radians([0.0, 30.0, 60.0, 80.0, 89.0])
+    wo = np.stack([np.sin(views), np.zeros_like(views), np.cos(views)], axis=1)
+    integral = directional_albedo(lambda wi, w: closures_np.sheen(wi, w, roughness), wo, quadrature=(256, 512))
+    albedo = closures_np.sheen_albedo(wo, roughness)
+    assert np.allclose(integral, albedo, rtol=0.02, atol=1e-5)
+    assert albedo.max() < 1.0 and (albedo.max() > 0.3 or roughness < 0.5)
+    f = closures_np.sheen(_dirs(4000, 27), np.tile(wo, (800, 1)), roughness)
+    assert np.isfinite(f).all() and f.min() >= 0.0
+
+
 @pytest.mark.parametrize("form", ["osl", "nodes"])
 def test_a_flake_normal_below_the_tangent_plane_maps_like_its_opposite(form):
     """S = α²I + (1 − α²)nnᵀ is the same for ±n (two-sided flakes; the reference agrees): the closure normal
