@@ -141,7 +141,7 @@ def test_the_variants_fitted_together_are_the_fits_made_one_by_one(monkeypatch):
     monkeypatch.setattr(fitted, "KNOTS", 5)
     monkeypatch.setattr(fitted, "AZIMUTHS", 2)
     p = _preset(thin_coat, "smooth_over_rough")
-    problem = choice._problem(thin_coat.ID, p, "osl")
+    problem = choice.fit_problem(thin_coat.ID, p, "osl")
     variants = [(v.damping, v.toons) for v in choice.VARIANTS]
     together = fitted.fit_variants(*problem, "osl", variants)
     alone = [fitted.fit(*problem, "osl", damping, toons) for damping, toons in variants]
@@ -159,7 +159,7 @@ def test_spare_closures_may_render_beyond_the_analytic_count_and_never_fit_worse
     monkeypatch.setattr(fitted, "KNOTS", 5)
     monkeypatch.setattr(fitted, "AZIMUTHS", 2)
     p = _preset(spongecake, "leaf")
-    problem = choice._problem(spongecake.ID, p, "osl")
+    problem = choice.fit_problem(spongecake.ID, p, "osl")
     analytic_closures = budget.shader_size(spongecake.ID, p, "osl")[1]
     shipped, spared = (fitted.fit_variants(*problem, "osl", [(1.0, True)], spare=n)[0] for n in (0, 2))
     assert budget.shader_size(spongecake.ID, p, "osl", shipped)[1] <= analytic_closures
