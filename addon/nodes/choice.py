@@ -39,14 +39,16 @@ def cache_folder() -> Path:
 
 
 def fit_key(model_id: str, p, form: str, driven: fitted.Driven | None = None) -> str:
-    """What a fit depends on: the parameters, the form, whether node groups have the Metallic BSDF, the fitter, a
-    driven input's tabulated values (the input's own constant does not count then) and, with multiple scattering,
-    what the reference's multiple scattering comes from (the bake module's ``ms_identity``)."""
+    """What a fit depends on: the parameters, the form, for node groups whether they have the Metallic BSDF (OSL
+    always has ``metal``, so an OSL fit made under Blender 4.2 holds under 5.0), the fitter, a driven input's
+    tabulated values (the input's own constant does not count then) and, with multiple scattering, what the
+    reference's multiple scattering comes from (the bake module's ``ms_identity``)."""
     from .expr import NumpyBackend
 
     if driven is not None:
         p = at(model_id, p, driven, len(driven.values) // 2)
-    parts = [FITTER_VERSION, model_id, p.to_dict(), form, NumpyBackend.metallic_node, driven and driven.to_json()]
+    metallic_node = NumpyBackend.metallic_node if form == "nodes" else None
+    parts = [FITTER_VERSION, model_id, p.to_dict(), form, metallic_node, driven and driven.to_json()]
     if getattr(p, "multiple_scattering", False):
         parts.append(importlib.import_module(f"..bake.{model_id}", __package__).ms_identity(len(p.layers)))
     return __import__("hashlib").sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()[:24]

@@ -538,29 +538,51 @@ def beckmann_refraction_albedo(wo, alpha, ior, normal):
 
 def ggx_conductor_albedo(wo, alpha_x, alpha_y, tangent, eta, k, nodes: int = 32):
     """Directional albedo (N, 3) of ``ggx_conductor`` (``_visible_normal_albedo``)."""
-    return _visible_normal_albedo(lambda wi: ggx_conductor(wi, wo, alpha_x, alpha_y, tangent, eta, k), wo,
-                                  alpha_x, alpha_y, (0.0, 0.0, 1.0), tangent, nodes)
+    def value_of(wi, rows):
+        return ggx_conductor(wi, wo[rows], *(_at_views(a, rows, len(wo), 1) for a in (alpha_x, alpha_y)),
+                             *(_at_views(a, rows, len(wo), 2) for a in (tangent, eta, k)))
+
+    return _visible_normal_albedo(value_of, wo, alpha_x, alpha_y, (0.0, 0.0, 1.0), tangent, nodes)
 
 
 def ggx_albedo(wo, alpha_x, alpha_y=None, normal=(0.0, 0.0, 1.0), tangent=(1.0, 0.0, 0.0), f0=None, nodes: int = 32):
     """Directional albedo (N, 3) of ``ggx_reflection`` (``_visible_normal_albedo`` around the normal Cycles bends)."""
     bent = ensure_valid_specular_reflection(
         _normalize(np.broadcast_to(np.asarray(normal, dtype=float), (len(wo), 3)).astype(np.float64)), wo)
-    return _visible_normal_albedo(lambda wi: ggx_reflection(wi, wo, alpha_x, alpha_y, normal, tangent, f0), wo,
-                                  alpha_x, alpha_x if alpha_y is None else alpha_y, bent, tangent, nodes)
+
+    def value_of(wi, rows):
+        return ggx_reflection(wi, wo[rows], *(_at_views(a, rows, len(wo), 1) for a in (alpha_x, alpha_y)),
+                              *(_at_views(a, rows, len(wo), 2) for a in (normal, tangent, f0)))
+
+    return _visible_normal_albedo(value_of, wo, alpha_x, alpha_x if alpha_y is None else alpha_y, bent, tangent,
+                                  nodes)
+
+
+def _at_views(x, rows, n: int, per_view_ndim: int):
+    """A closure parameter given per view (``per_view_ndim`` dimensions, the first ``n`` long: 1 for a roughness, 2
+    for a direction or a colour) at the views ``rows``; one for every view (or None) as it is."""
+    if x is None:
+        return None
+    a = np.asarray(x, dtype=float)
+    return a[rows] if a.ndim == per_view_ndim and a.shape[0] == n else a
+
+
+PAIRS_PER_BLOCK = 1 << 16  # (quadrature node, view) pairs evaluated at once by ``_visible_normal_albedo``
 
 
 def _visible_normal_albedo(value_of, wo, alpha_x, alpha_y, normal, tangent, nodes: int):
-    """∫ f(ωi, ωo) cos θi dωi (N, 3) for a GGX closure's value ``value_of(wi)``: f cos θi over the density of
-    reflecting ``wo`` about a visible normal of the GGX around ``normal`` (Heitz 2018's sampler in the stretched
-    frame), summed on a ``nodes`` x ``nodes`` product rule (Gauss-Legendre in u1, midpoint in u2): exact for lobes of
-    any sharpness, where a direction grid misses a near-mirror lobe."""
+    """∫ f(ωi, ωo) cos θi dωi (N, 3) for a GGX closure's value ``value_of(wi, rows)`` (light from ``wi`` towards the
+    views ``wo[rows]``): f cos θi over the density of reflecting ``wo`` about a visible normal of the GGX around
+    ``normal`` (Heitz 2018's sampler in the stretched frame), summed on a ``nodes`` x ``nodes`` product rule
+    (Gauss-Legendre in u1, midpoint in u2): exact for lobes of any sharpness, where a direction grid misses a
+    near-mirror lobe. The nodes are taken in blocks, each for every view at once."""
     n = len(wo)
     ax = np.broadcast_to(np.asarray(alpha_x, dtype=float), (n,))
     ay = np.broadcast_to(np.asarray(alpha_y, dtype=float), (n,))
     t, b, nz = _frame(normal, tangent, n)
     x, gw = np.polynomial.legendre.leggauss(nodes)
     u1, u2 = np.meshgrid(0.5 * (x + 1.0), (np.arange(nodes) + 0.5) / nodes, indexing="ij")
+    r, phi = np.sqrt(u1.ravel()), 2.0 * np.pi * u2.ravel()
     weights = np.repeat(0.5 * gw / nodes, nodes)
     out = np.zeros((n, 3))
     lo = np.stack([_dot(wo, t), _dot(wo, b), _dot(wo, nz)], axis=1)
@@ -568,21 +590,25 @@ def _visible_normal_albedo(value_of, wo, alpha_x, alpha_y, normal, tangent, node
     e1 = np.where((np.hypot(v[:, 0], v[:, 1]) > 1e-12)[:, None],
                   _normalize(np.stack([-v[:, 1], v[:, 0], np.zeros(n)], axis=1) + 1e-300), np.array([[1.0, 0, 0]]))
     e2 = np.cross(v, e1)
-    for r1, r2, w in zip(u1.ravel(), u2.ravel(), weights):
-        r, phi = math.sqrt(r1), 2.0 * math.pi * r2
-        p1, p2 = r * math.cos(phi), r * math.sin(phi)
-        s = 0.5 * (1.0 + v[:, 2])
-        p2 = (1.0 - s) * math.sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2
+    s = 0.5 * (1.0 + v[:, 2])
+    g1 = 1.0 / (1.0 + ggx_lambda(lo, ax, ay))
+    block = max(1, PAIRS_PER_BLOCK // max(n, 1))
+    for k in (slice(k0, k0 + block) for k0 in range(0, len(weights), block)):
+        m = len(weights[k])
+        rows = np.tile(np.arange(n), m)  # pair j: node j // n, view j % n
+        p1, p2 = np.repeat(r[k] * np.cos(phi[k]), n), np.repeat(r[k] * np.sin(phi[k]), n)
+        p2 = (1.0 - s[rows]) * np.sqrt(np.maximum(0.0, 1.0 - p1 * p1)) + s[rows] * p2
         p3 = np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))
-        hs = p1 * e1 + p2[:, None] * e2 + p3[:, None] * v
-        h = _normalize(np.stack([ax * hs[:, 0], ay * hs[:, 1], np.maximum(hs[:, 2], 1e-12)], axis=1))
-        li = 2.0 * _dot(lo, h)[:, None] * h - lo
-        wi = li[:, :1] * t + li[:, 1:2] * b + li[:, 2:] * nz
+        hs = p1[:, None] * e1[rows] + p2[:, None] * e2[rows] + p3[:, None] * v[rows]
+        h = _normalize(np.stack([ax[rows] * hs[:, 0], ay[rows] * hs[:, 1], np.maximum(hs[:, 2], 1e-12)], axis=1))
+        lo_k = lo[rows]
+        li = 2.0 * _dot(lo_k, h)[:, None] * h - lo_k
+        wi = li[:, :1] * t[rows] + li[:, 1:2] * b[rows] + li[:, 2:] * nz[rows]
         # density of wi: D_wo(h) / (4 wo·h) with D_wo(h) = G1(wo) (wo·h) D(h) / cos θo
-        g1 = 1.0 / (1.0 + ggx_lambda(lo, ax, ay))
-        density = g1 * ggx_d(h, ax, ay) / (4.0 * np.maximum(lo[:, 2], 1e-300))
-        value = value_of(wi) * np.maximum(wi[:, 2:], 0.0)
-        out += w * np.divide(value, density[:, None], out=np.zeros_like(value), where=density[:, None] > 0)
+        density = g1[rows] * ggx_d(h, ax[rows], ay[rows]) / (4.0 * np.maximum(lo_k[:, 2], 1e-300))
+        value = value_of(wi, rows) * np.maximum(wi[:, 2:], 0.0)
+        value = np.divide(value, density[:, None], out=np.zeros_like(value), where=density[:, None] > 0)
+        out += (np.repeat(weights[k], n)[:, None] * value).reshape(m, n, 3).sum(axis=0)
     return np.where(((wo[:, 2] > 0) & (lo[:, 2] > 0))[:, None], out, 0.0)
 
 

@@ -189,6 +189,25 @@ def test_a_changed_value_is_a_different_fit():
     assert choice.fit_key(thin_coat.ID, p, "osl") != choice.fit_key(thin_coat.ID, p, "nodes")
 
 
+def test_only_node_group_fits_depend_on_the_metallic_bsdf_node(monkeypatch):
+    """Blender 4.2's node groups have no Metallic BSDF, so their prediction (and fit) differs; OSL always has
+    ``metal``: its fit made under 4.2 is the one 5.0 would make."""
+    from addon.nodes import expr
+
+    p = _preset(thin_coat, "varnished_metal")
+    keys = {form: choice.fit_key(thin_coat.ID, p, form) for form in ("osl", "nodes")}
+    monkeypatch.setattr(expr.NumpyBackend, "metallic_node", not expr.NumpyBackend.metallic_node)
+    assert choice.fit_key(thin_coat.ID, p, "osl") == keys["osl"]
+    assert choice.fit_key(thin_coat.ID, p, "nodes") != keys["nodes"]
+    closures = {}  # what the OSL key leaves out does not change what OSL renders (it does the node group's)
+    for metal in (True, False):
+        monkeypatch.setattr(expr.NumpyBackend, "metallic_node", metal)
+        for form in ("osl", "nodes"):
+            closures[form, metal] = repr(_backend_of(thin_coat.ID, p, form)(np.array([[0.0, 0.6, 0.8]])).closures)
+    assert closures["osl", True] == closures["osl", False]
+    assert closures["nodes", True] != closures["nodes", False]
+
+
 def test_a_fit_with_multiple_scattering_follows_what_that_comes_from(monkeypatch):
     """The reference a fit matches includes the network's multiple scattering and its energy scale: a new version of
     either is a different fit; a material without multiple scattering keeps its fit."""

@@ -52,15 +52,16 @@ def _assert_texel(maps, layout, inputs, y, x):
         np.testing.assert_allclose(maps[name][y, x], want, rtol=1e-6, atol=1e-7, err_msg=f"{name} at {(y, x)}")
 
 
-def test_every_texel_is_the_prediction_for_that_texels_parameters():
+def test_texels_are_the_prediction_for_their_own_parameters():
     p, inputs = _params(), _inputs()
     maps = textures.bake_maps(p, inputs)
     layout = textures.map_layout(p)
     assert set(maps) == set(layout)
     assert all(m.shape == (3, 5, 4) and m.dtype == np.float32 for m in maps.values())
-    for y in range(3):
-        for x in range(5):
-            _assert_texel(maps, layout, inputs, y, x)
+    # the corners and the centre (each texel's expected values cost a constant bake): a flipped, mirrored or shifted
+    # bake moves a corner's values to another corner
+    for y, x in ((0, 0), (0, 4), (2, 0), (2, 4), (1, 2)):
+        _assert_texel(maps, layout, inputs, y, x)
     # the maps really vary across both axes: a flipped or mirrored bake fails above
     reflection = next(maps[name] for name, channels in layout.items() if channels[0][0] == "MS Reflection")
     assert not np.allclose(reflection[0], reflection[-1]) and not np.allclose(reflection[:, 0], reflection[:, -1])
