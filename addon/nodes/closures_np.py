@@ -31,7 +31,6 @@ BSDF: ``ggx_sampling_leak`` models it (5.0 rejects those samples).
 from __future__ import annotations
 
 import functools
-import math
 import os
 
 import numpy as np

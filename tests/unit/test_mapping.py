@@ -7,6 +7,7 @@ from addon.models import spongecake as model
 from addon import nodes
 from addon.nodes import closures_np, expr
 from addon.nodes import spongecake as mapping
+from addon.reference.frames import spherical
 
 
 def _dirs(n, seed, lower=False):
@@ -178,6 +179,28 @@ def test_a_tilted_ggx_closure_is_foreshortened_by_its_own_normal():
     expected = in_frame * ((wi @ normal) / wi[:, 2] * (wi[:, 2] > 0))[:, None]
     np.testing.assert_allclose(f, expected, rtol=1e-9, atol=1e-300)
     assert np.any((wi[:, 2] < 0) & (wi @ normal > 0) & (in_frame[:, 0] > 0))  # the case that must give 0
+
+
+@pytest.mark.parametrize("block", [7, closures_np.PAIRS_PER_BLOCK])
+def test_the_ggx_albedo_quadrature_gives_each_view_its_own_parameters(block, monkeypatch):
+    """The visible-normal quadrature evaluates its nodes in blocks for every view at once: each view's albedo is the
+    one it gets alone, with per-view roughness, normal, tangent and colours (three views: as long as a colour),
+    whether a block ends within the views or not."""
+    monkeypatch.setattr(closures_np, "PAIRS_PER_BLOCK", block)
+    wo = spherical(np.array([0.9, 0.4, 0.05]), np.array([0.3, 2.0, 4.0]))
+    normal = np.array([[0.3, 0.0, 0.95], [0.0, 0.0, 1.0], [-0.2, 0.4, 0.9]])
+    tangent = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.6, 0.8, 0.0]])
+    ax, ay, f0 = np.array([0.05, 0.3, 0.8]), np.array([0.2, 0.3, 0.1]), np.array([[0.1, 0.5, 0.9], [1.0, 1.0, 1.0],
+                                                                                     [0.3, 0.2, 0.1]])
+    eta, k = np.array([[0.2, 0.9, 1.1], [1.5, 1.5, 1.5], [0.3, 0.4, 0.5]]), (3.0, 2.5, 2.0)
+    together = closures_np.ggx_albedo(wo, ax, ay, normal, tangent, f0, nodes=16)
+    metal = closures_np.ggx_conductor_albedo(wo, ax, ay, tangent, eta, k, nodes=16)
+    for i in range(3):
+        alone = closures_np.ggx_albedo(wo[i:i + 1], ax[i], ay[i], normal[i], tangent[i], f0[i], nodes=16)
+        np.testing.assert_allclose(together[i], alone[0], rtol=1e-12)
+        alone = closures_np.ggx_conductor_albedo(wo[i:i + 1], ax[i], ay[i], tangent[i], eta[i], k, nodes=16)
+        np.testing.assert_allclose(metal[i], alone[0], rtol=1e-12)
+    assert np.ptp(together, axis=1).max() > 0.01 and np.all(together > 0)  # the colours and views matter
 
 
 def test_blender_4_2_sampling_leak_only_for_a_normal_off_the_shading_normal():
