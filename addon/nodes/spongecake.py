@@ -337,10 +337,12 @@ def ms_values(p: model.Params, form: str) -> dict:
 
 @lru_cache(maxsize=64)
 def _ms_values(p: model.Params, form: str, weights: str) -> dict:
-    return {**_lobe_values(p), **energy_values(p, form)}
+    return {**lobe_values(p), **energy_values(p, form)}
 
 
-def _lobe_values(p: model.Params) -> dict:
+def lobe_values(p: model.Params) -> dict:
+    """The network's lobes as ``MS`` socket values: every baked input but the energy budget, i.e. what a texture
+    bake gives each texel (addon.bake.textures)."""
     from ..bake.spongecake import predict
 
     pred = predict(p)
@@ -501,7 +503,7 @@ def _part_furnace(p: model.Params, wo, form: str, single: bool):
     those two (``_scattering``). ``p`` is shaded with multiple scattering whether or not it has it (the budget's
     white stack, ``model.white``, has not)."""
     p = replace(p, multiple_scattering=True)
-    values = {**input_values(p), **_lobe_values(p)}
+    values = {**input_values(p), **lobe_values(p)}
     scales = (1.0, None) if single else (None, 1.0)
 
     def shaded(w):

@@ -2,7 +2,7 @@
 each half of a two-valued texture as the per-texel prediction for that half's parameters; bad inputs are refused
 with nothing written or wired; the operator and ``lamina bake``.
 
-Expected values come from the network itself (``nodes.spongecake.ms_values`` of one texel's stack), never from
+Expected values come from the network itself (``nodes.spongecake.lobe_values`` of one texel's stack), never from
 numbers written here: the shipped weights are placeholders until the real training run. Because the placeholder
 network predicts almost no multiple scattering, the renders also run with a stand-in network whose lobes are
 strong (W1 = 1/2, Lambert weights 0.3 albedo (1 - e^-T)), so a wrong or flipped baked texel shows."""
@@ -180,13 +180,13 @@ def test_baked_maps_load_as_non_color_and_match_the_prediction_per_source_texel(
         np.testing.assert_array_equal(px, exr.read_exr(bpy.path.abspath(image.filepath), "RGBA"))
         for y in range(H):
             for x in range(W):
-                want = mapping.ms_values(_params({param: _texel_value(received, y, x)}), form)
+                want = mapping.lobe_values(_params({param: _texel_value(received, y, x)}))
                 expected = [np.atleast_1d(want[e[0]])[e[1]] if e else (1.0 if c == 3 else 0.0)
                             for c, e in enumerate(channels)]
                 np.testing.assert_allclose(px[y, x], expected, rtol=1e-5, atol=1e-7, err_msg=f"{name} {(x, y)}")
     # the marker texel differs from its half: a flipped map fails above
-    marker = mapping.ms_values(_params({param: _texel_value(received, 0, 0)}), form)
-    left = mapping.ms_values(_params({param: _texel_value(received, H - 1, 0)}), form)
+    marker = mapping.lobe_values(_params({param: _texel_value(received, 0, 0)}))
+    left = mapping.lobe_values(_params({param: _texel_value(received, H - 1, 0)}))
     assert marker != left
 
 
