@@ -440,13 +440,29 @@ def _grid_albedo(evaluate, wo, per_pixel: dict, rows):
 
 
 def _microfacet_albedo(wo, alpha, normal, scatter):
-    """The slope rule for every view: Gauss-Hermite, Halton where the horizon cuts the lobe (``HORIZON_WIDTHS``)."""
+    """The slope rule for every view: Gauss-Hermite, Halton where the horizon cuts the lobe (``HORIZON_WIDTHS``),
+    each rule run on its own views only."""
     a = _cycles_alpha(alpha, len(wo))
-    out = _slope_albedo(wo, a, normal, scatter, False)
+    normal = np.broadcast_to(np.asarray(normal, dtype=float), (len(wo), 3))
     cut = wo[:, 2] < HORIZON_WIDTHS * a
-    if cut.any():
-        normal = np.broadcast_to(np.asarray(normal, dtype=float), (len(wo), 3))
-        out[cut] = _slope_albedo(wo[cut], a[cut], normal[cut], _rows(scatter, cut), True)
+    out = np.zeros(len(wo))
+    for rows, halton in ((~cut, False), (cut, True)):
+        if rows.any():
+            out[rows] = _slope_albedo(wo[rows], a[rows], normal[rows], _rows(scatter, rows), halton)
+    return out
+
+
+def _beckmann_albedo(evaluate, wo, alpha, normal, scatter, per_pixel: dict):
+    """(N, 3): the direction grid (``_grid_albedo`` of ``evaluate`` with ``per_pixel``) for the views whose α is at
+    least GRID_ALPHA, the slope rule (``_microfacet_albedo`` with ``scatter``) for the others."""
+    n = len(wo)
+    a = _cycles_alpha(alpha, n)
+    rough = a >= GRID_ALPHA
+    out = _grid_albedo(evaluate, wo, per_pixel, rough)
+    sharp = ~rough
+    if sharp.any():
+        normal = np.broadcast_to(np.asarray(normal, dtype=float), (n, 3))
+        out[sharp] = _microfacet_albedo(wo[sharp], a[sharp], normal[sharp], _rows(scatter, sharp))[:, None]
     return out
 
 
@@ -503,12 +519,7 @@ def beckmann_reflection_albedo(wo, alpha, eta=None, normal=(0.0, 0.0, 1.0)):
             weight = weight * microfacet.fresnel_dielectric(_dot(wi, h), eta_n[rows])
         return wi, weight
 
-    out = np.repeat(_microfacet_albedo(wo, alpha, bent, scatter)[:, None], 3, axis=1)
-    rough = _cycles_alpha(alpha, n) >= GRID_ALPHA
-    if rough.any():
-        grid = _grid_albedo(beckmann_reflection, wo, {"alpha": alpha, "eta": eta, "normal": bent}, rough)
-        out = np.where(rough[:, None], grid, out)
-    return out
+    return _beckmann_albedo(beckmann_reflection, wo, alpha, bent, scatter, {"alpha": alpha, "eta": eta, "normal": bent})
 
 
 def beckmann_refraction_albedo(wo, alpha, ior, normal):
@@ -527,12 +538,8 @@ def beckmann_refraction_albedo(wo, alpha, ior, normal):
         weight = ((c > 0) & (s2 < 1.0) & (wi[:, 2] < 0) & (_dot(nn, wi) < 0)).astype(float)
         return _normalize(wi), weight
 
-    out = np.repeat(_microfacet_albedo(wo, alpha, normal_n, scatter)[:, None], 3, axis=1)
-    rough = _cycles_alpha(alpha, n) >= GRID_ALPHA
-    if rough.any():
-        grid = _grid_albedo(beckmann_refraction, wo, {"alpha": alpha, "ior": ior, "normal": normal_n}, rough)
-        out = np.where(rough[:, None], grid, out)
-    return out
+    return _beckmann_albedo(beckmann_refraction, wo, alpha, normal_n, scatter,
+                            {"alpha": alpha, "ior": ior, "normal": normal_n})
 
 
 def ggx_conductor_albedo(wo, alpha_x, alpha_y, tangent, eta, k, nodes: int = 32):

@@ -80,7 +80,16 @@ def predict(net: mlp.MLP, rho, z, theta, phi, albedo, g) -> np.ndarray:
     m = net.manifest
     x = encode(rho, z, theta, phi, albedo, g, m.get("encoding", ENCODING))
     a = np.clip(np.broadcast_arrays(rho, z, theta, phi, np.asarray(albedo, dtype=np.float64), g)[4].ravel(), 0.0, 1.0)
-    return np.maximum(np.expm1(net(x)[:, 0]), 0.0) * m.get("phi_0", 1.0) * a ** m.get("albedo_power", 0)
+    return np.maximum(np.expm1(_in_blocks(net, x)[:, 0]), 0.0) * m.get("phi_0", 1.0) * a ** m.get("albedo_power", 0)
+
+
+BLOCK = 16384  # rows a network evaluates at once: a block's hidden activations stay in the cache
+
+
+def _in_blocks(net: mlp.MLP, x: np.ndarray) -> np.ndarray:
+    """net(x), BLOCK rows at a time: the same values (each row is evaluated alone), faster than one pass over a
+    table's million rows, whose activations (400 MB a layer) stream through memory."""
+    return np.concatenate([net(x[i:i + BLOCK]) for i in range(0, max(len(x), 1), BLOCK)])
 
 
 def cell_centres(rho_edges, z_edges, encoding: dict = ENCODING) -> tuple[np.ndarray, np.ndarray]:
@@ -193,10 +202,11 @@ def _double_ring(r0: float, r1: float, z0, z1, sub: int, quadrature) -> np.ndarr
 def _suffix_sums(rho, half_mid, half_edge, g) -> np.ndarray:
     """(n_rho, nodes + 1, n_dir): S_m = sum over the steps n >= m of exp(-rho (tan(psi_n / 2) - tan(e_m / 2))) g_n,
     by the backward recursion S_m = exp(-rho (t_m - T_m)) g_m + exp(-rho (T_m+1 - T_m)) S_m+1 (every exponent <= 0)."""
+    own = np.exp(-rho[:, None] * (half_mid - half_edge[:-1]))[..., None]  # (n_rho, nodes, 1): every step's factors
+    carried = np.exp(-rho[:, None] * (half_edge[1:] - half_edge[:-1]))[..., None]
     out = np.zeros((len(rho), len(half_mid) + 1, g.shape[1]))
     for m in range(len(half_mid) - 1, -1, -1):
-        out[:, m] = (np.exp(-rho * (half_mid[m] - half_edge[m]))[:, None] * g[m]
-                     + np.exp(-rho * (half_edge[m + 1] - half_edge[m]))[:, None] * out[:, m + 1])
+        out[:, m] = own[:, m] * g[m] + carried[:, m] * out[:, m + 1]
     return out
 
 
@@ -232,8 +242,8 @@ class Table:
         return axes, inside
 
     def at(self, located: tuple) -> np.ndarray:
-        """Phi at points ``locate`` found: the 16 corners gathered by flat index, lerped along phi, then theta, z
-        and rho."""
+        """Phi at points ``locate`` found (the axes may broadcast against each other): the 16 corners gathered by
+        flat index, lerped along phi, then theta, z and rho."""
         axes, inside = located
         shape = self.values.shape
         strides = (shape[1] * shape[2] * shape[3], shape[2] * shape[3], shape[3], 1)
@@ -243,7 +253,8 @@ class Table:
         values = {}
         for c in range(8):  # bits: rho, z, theta
             b = base + sum(((c >> a) & 1) * step[a] for a in range(3))
-            values[c] = flat[b] + axes[3][1] * (flat[b + step[3]] - flat[b])
+            lower = flat.take(b)
+            values[c] = lower + axes[3][1] * (flat.take(b + step[3]) - lower)
         for a in (2, 1, 0):
             w = axes[a][1]
             values = {c: values[c] + w * (values[c | (1 << a)] - values[c]) for c in values if not (c >> a) & 1}
@@ -257,20 +268,20 @@ def segment_table(table: Table, steps: int = 16, length: float = SEGMENT) -> Tab
     """The paper's segment-to-segment table (Sec. 3.7): at each cell centre x0 and direction bin centre w of
     ``table``, A(x0, w) = Integral_0^length exp(-s) Phi(x0 - s w, w) ds, the light a camera segment of ``length``
     mean free paths starting at x0 and looking against w gathers, by ``steps`` quantiles of the exponential.
-    ``gather`` uses it with the paper's weight W (Eq. 5) for shorter segments."""
+    ``gather`` uses it with the paper's weight W (Eq. 5) for shorter segments. The source's axis is +z, so the
+    segments' rho, theta and phi do not depend on z: they are found once per row of cells, their z once in all."""
     rho_c, z_c = cell_centres(table.rho_edges, table.z_edges)
     th, ph = (a.ravel() for a in np.meshgrid(table.theta, table.phi, indexing="ij"))
     w = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], axis=1)  # (D, 3) at (rho, 0, z)
     reach = -math.expm1(-length)
     s = -np.log1p(-(np.arange(steps) + 0.5) / steps * reach)
     source, axis = np.zeros((1, 1, 3)), np.array([[[0.0, 0.0, 1.0]]])
-    rays = np.tile(w, (len(z_c), 1))  # (n_z D, 3): every direction at every z of the row
+    z = z_c[:, None, None] - s[None, None, :] * w[None, :, None, 2]  # (n_z, D, steps) along every segment of the row
     out = np.zeros((len(rho_c), len(z_c), len(w)))
     for i, rho in enumerate(rho_c):
-        starts = np.repeat(np.stack([np.full(len(z_c), rho), np.zeros(len(z_c)), z_c], axis=1), len(w), axis=0)
-        x = starts[:, None, :] - s[None, :, None] * rays[:, None, :]  # (n_z D, steps, 3)
-        values = table.lookup(*(c[..., 0] for c in _coordinates(x, source, axis, rays, 1.0)))
-        out[i] = (reach / steps * values.sum(axis=1)).reshape(len(z_c), len(w))
+        x = np.array([rho, 0.0, 0.0]) - s[None, :, None] * w[:, None, :]  # (D, steps, 3): the segments from z = 0
+        rho_x, _, theta, phi = (c[..., 0] for c in _coordinates(x, source, axis, w, 1.0))
+        out[i] = reach / steps * table.lookup(rho_x, z, theta, phi).sum(axis=-1)
     return Table(out.reshape(table.values.shape), table.rho_edges, table.z_edges, table.theta, table.phi,
                  float(length))
 
@@ -443,7 +454,7 @@ def _mirror(points, directions, plane_points, normals, offset: float):
 def _coordinates(x, sources, directions, w, ell: float) -> tuple:
     """(rho, z, theta, phi) in the tables' frame, lengths in mfp, of the points x (R, S, 3) from the sources
     (R or 1, M, 3) along their unit directions (same shape), seen along the propagation directions w (R, 3):
-    each (R, S, M)."""
+    each (R, S, M) but theta, the same at every point of a ray, (R, 1, M)."""
     v = x[:, :, None, :] - sources[:, None, :, :]
     d = directions[:, None, :, :]
     z = np.einsum("rsmk,rsmk->rsm", v, np.broadcast_to(d, v.shape))
@@ -452,7 +463,7 @@ def _coordinates(x, sources, directions, w, ell: float) -> tuple:
     e_rho = np.where((rho > 1e-12)[..., None], radial / np.maximum(rho, 1e-12)[..., None], _perpendicular(d))
     wb = np.broadcast_to(w[:, None, None, :], v.shape)
     cos_theta = np.einsum("rmk,rk->rm", np.broadcast_to(directions, (len(w),) + directions.shape[1:]), w)
-    theta = np.broadcast_to(np.arccos(np.clip(cos_theta, -1.0, 1.0))[:, None, :], rho.shape)
+    theta = np.arccos(np.clip(cos_theta, -1.0, 1.0))[:, None, :]
     phi = np.abs(np.arctan2(np.einsum("rsmk,rsmk->rsm", np.cross(d, e_rho), wb),
                             np.einsum("rsmk,rsmk->rsm", e_rho, wb)))
     return rho / ell, z / ell, theta, phi

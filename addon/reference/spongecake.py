@@ -314,11 +314,11 @@ def lobes_albedo(params: Params, wo):
     return network_albedo(params, predict(params), wo)
 
 
-def leftover(params: Params, wo, n: int = ENERGY_SAMPLES):
+def leftover(params: Params, wo, n: int | None = None):
     """1 - A_ss - T_delta towards wo (N, 3): what single scattering and the Dirac (rendered or not) leave; A_ss by
-    ``directional_albedo`` with ``n`` directions per view."""
+    ``directional_albedo`` with ``n`` directions per view (``ENERGY_SAMPLES`` as it is at the call)."""
     through = np.exp(-_optical_depths(params, wo).sum(axis=0))[:, None] * (params.substrate is None)
-    return 1.0 - directional_albedo(params, wo, n=n) - through
+    return 1.0 - directional_albedo(params, wo, n=ENERGY_SAMPLES if n is None else n) - through
 
 
 def network_albedo(params: Params, pred, wo):

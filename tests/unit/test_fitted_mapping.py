@@ -12,9 +12,22 @@ from addon.nodes.expr import NumpyBackend, OslBackend
 
 @pytest.fixture(autouse=True)
 def private_cache(tmp_path, monkeypatch):
-    """Each test fits into its own cache folder, with an empty memory cache."""
+    """Each test fits into its own cache folder, with an empty memory cache (unless it asks for ``shared_fits``)."""
     monkeypatch.setenv("LAMINA_CACHE", str(tmp_path))
     monkeypatch.setattr(choice, "_fits", {})
+
+
+@pytest.fixture(scope="module")
+def _module_cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("fits"), {}
+
+
+@pytest.fixture
+def shared_fits(private_cache, _module_cache, monkeypatch):
+    """For tests that only read fits (they neither count fits nor patch the fitter): this module's fits, made once."""
+    folder, memory = _module_cache
+    monkeypatch.setenv("LAMINA_CACHE", str(folder))
+    monkeypatch.setattr(choice, "_fits", memory)
 
 
 def _preset(model, name):
@@ -88,7 +101,7 @@ def test_the_fitter_recovers_a_mixture_it_generated(form):
 
 
 @pytest.mark.parametrize("form", ["osl", "nodes"])
-def test_the_fitted_mapping_renders_no_more_closures_than_the_analytic_one(form):
+def test_the_fitted_mapping_renders_no_more_closures_than_the_analytic_one(form, shared_fits):
     """The fit may put a dictionary closure in place of one of the material's own, never beside them all (issue 14's
     cost: the same closure count or fewer). The leaf's OSL fit gained two closures before this rule, for about a
     point of error on the comparison scenes (docs/accuracy.md, sphere 42.3% then, 43.4% now)."""
@@ -109,7 +122,7 @@ def test_auto_keeps_the_analytic_mapping_where_it_is_exact():
     assert "analytic" in chosen.summary() and "fitted" in chosen.summary()
 
 
-def test_auto_takes_the_fitted_mapping_where_it_is_closer():
+def test_auto_takes_the_fitted_mapping_where_it_is_closer(shared_fits):
     p = _preset(thin_coat, "amber_lacquer")
     chosen = choice.choose(thin_coat.ID, p, "osl", "auto")
     assert chosen.used == "fitted"
@@ -250,7 +263,7 @@ def test_bad_materials_give_finite_non_negative_closures_and_a_message(name):
         assert "black" in chosen.summary()
 
 
-def test_both_forms_get_the_tables():
+def test_both_forms_get_the_tables(shared_fits):
     """The OSL source carries a constant array per table (16 colours), declared among the shader's parameters (OSL
     keeps a parameter nothing sets as a constant; a local array is filled at every shading point); the numpy backend
     interpolates them, in √cos θo from the first knot's view to normal view."""
@@ -334,7 +347,7 @@ def test_closures_alike_at_one_driven_value_only_stay_apart():
     assert fitted.common_groups(backends) == at_second
 
 
-def test_a_driven_fit_between_its_values_is_as_close_as_a_fit_made_there():
+def test_a_driven_fit_between_its_values_is_as_close_as_a_fit_made_there(shared_fits):
     """Depth of the amber lacquer from a texture over [0.1, 1]: at 0.4375, between two tabulated values, the
     interpolated tables are within 1% (absolute relative RMSE) of a fit made at 0.4375, on every comparison scene."""
     p = _preset(thin_coat, "amber_lacquer")
@@ -373,7 +386,7 @@ def test_velvet_is_reciprocal_and_its_grid_albedo_matches_a_monte_carlo_estimate
         assert grid[-1] > 0.5 and grid[0] < 0.01  # light between grazing directions only
 
 
-def test_the_fit_of_fibers_along_the_normal_adds_velvet():
+def test_the_fit_of_fibers_along_the_normal_adds_velvet(shared_fits):
     """The sheen preset (fibers standing along the normal) scatters most between grazing directions, which only the
     velvet closure follows: its fit adds one and brings the furnace from 90% to within 5%."""
     p = _preset(spongecake, "sheen")
@@ -404,7 +417,7 @@ def test_toon_lobes_keep_grazing_light_and_carry_their_stated_energy():
     assert closures_np.glossy_toon(-light, view, 0.0, 1.0).max() == 0.0  # light from below
 
 
-def test_the_fit_of_a_rough_bottom_under_a_smooth_top_takes_the_toon_lobes():
+def test_the_fit_of_a_rough_bottom_under_a_smooth_top_takes_the_toon_lobes(shared_fits):
     """smooth_over_rough's wide ENDF lobes keep light at grazing incidence, which the Beckmann closures' masking takes
     away: the fit with the Toon lobes in its dictionary replaces the reflection orders by them and brings the sphere
     and the plane within the issue's 15% (from 27.5% and 16.9% without them)."""
@@ -415,7 +428,7 @@ def test_the_fit_of_a_rough_bottom_under_a_smooth_top_takes_the_toon_lobes():
     assert chosen.errors["fitted"]["sphere"] < 0.15 and chosen.errors["fitted"]["plane"] < 0.15
 
 
-def test_the_choice_keeps_the_fit_without_toon_lobes_where_they_mislead():
+def test_the_choice_keeps_the_fit_without_toon_lobes_where_they_mislead(shared_fits):
     """The Toon lobes lower leaf's fit in the fit's own measure (its quadrature) but raise its comparison scenes'
     error: each variant is measured on the scenes, and the Fitted mapping is the closest (not one with toons)."""
     p = _preset(spongecake, "leaf")
@@ -447,7 +460,7 @@ def test_the_fit_solves_on_one_blas_thread_and_gives_the_count_back(monkeypatch)
 
 
 @pytest.mark.parametrize("model, name", [(thin_coat, "varnished_metal"), (spongecake, "leaf"), (spongecake, "fabric")])
-def test_folded_colours_render_the_same_at_the_knots_with_fewer_operations(model, name):
+def test_folded_colours_render_the_same_at_the_knots_with_fewer_operations(model, name, shared_fits):
     """Where an atom's colour follows the view's elevation alone, its table carries colour × scale
     (``fitted.folded_colours``): the closures are the same at the knots' views, and the colour's arithmetic is gone
     from the shader. fabric's oriented fibers see the view's azimuth: those atoms keep their colour math."""

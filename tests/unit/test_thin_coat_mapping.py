@@ -299,16 +299,17 @@ def test_the_diffuse_orders_carry_their_energy_under_uniform_light():
 
 
 def test_albedo_quadratures_of_the_beckmann_closures():
-    """closures_np's own albedo quadratures against a 512 x 1024 direction grid where it resolves the lobe (α ≥ 0.03,
-    measured within 6e-4) and against Monte Carlo over the slopes where it does not (α = 0.005)."""
+    """closures_np's own albedo quadratures against a 256 x 512 direction grid where it resolves the lobe (α ≥ 0.03,
+    measured within 6e-4; the grid within 2.3e-7 of a 512 x 1024 one, at a quarter of its cost) and against Monte
+    Carlo over the slopes where it does not (α = 0.005)."""
     wo = spherical(np.array([0.02, 0.1, 0.3, 0.6, 1.0]), np.arange(5.0))
     for alpha in (1.0, 0.3, 0.09, 0.03):
         for eta in (None, 1.5):
             fine = scenes.directional_albedo(lambda wi, w: closures_np.beckmann_reflection(wi, w, alpha, eta), wo,
-                                             quadrature=(512, 1024))
+                                             quadrature=(256, 512))
             np.testing.assert_allclose(closures_np.beckmann_reflection_albedo(wo, alpha, eta), fine, atol=2e-4)
         fine = scenes.directional_albedo(lambda wi, w: closures_np.beckmann_refraction(wi, w, alpha, 10.0, w), wo,
-                                         quadrature=(512, 1024))
+                                         quadrature=(256, 512))
         np.testing.assert_allclose(closures_np.beckmann_refraction_albedo(wo, alpha, 10.0, wo), fine, atol=8e-4)
     rng = np.random.default_rng(5)
     t = rng.normal(scale=np.sqrt(0.5), size=(400_000, 2))
