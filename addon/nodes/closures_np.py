@@ -441,7 +441,8 @@ def _grid_albedo(evaluate, wo, per_pixel: dict, rows):
 
 def _microfacet_albedo(wo, alpha, normal, scatter):
     """The slope rule for every view: Gauss-Hermite, Halton where the horizon cuts the lobe (``HORIZON_WIDTHS``),
-    each rule run on its own views only."""
+    each rule run on its own views only (``_slope_albedo`` blocks its nodes by the view count, so many views may
+    differ from one call over all of them in the last bit)."""
     a = _cycles_alpha(alpha, len(wo))
     normal = np.broadcast_to(np.asarray(normal, dtype=float), (len(wo), 3))
     cut = wo[:, 2] < HORIZON_WIDTHS * a

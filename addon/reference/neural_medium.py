@@ -87,8 +87,8 @@ BLOCK = 16384  # rows a network evaluates at once: a block's hidden activations 
 
 
 def _in_blocks(net: mlp.MLP, x: np.ndarray) -> np.ndarray:
-    """net(x), BLOCK rows at a time: the same values (each row is evaluated alone), faster than one pass over a
-    table's million rows, whose activations (400 MB a layer) stream through memory."""
+    """net(x), BLOCK rows at a time: the same values up to BLAS's rounding of a short last block (rows do not mix),
+    faster than one pass over a table's million rows, whose activations stream through memory."""
     return np.concatenate([net(x[i:i + BLOCK]) for i in range(0, max(len(x), 1), BLOCK)])
 
 
