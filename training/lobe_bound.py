@@ -7,6 +7,8 @@ bound is the lobe form's own (issue 15's goal of 25% mean lobe error is measured
     python -m training.lobe_bound            # both layer counts of the shipped held-out set, a few minutes
     python -m training.lobe_bound --halves   # one layer, as two identical halves through the two-layer form
     python -m training.lobe_bound --forward  # with the forward lobe (an HG layer's single scattering)
+    python -m training.lobe_bound --forward --breakdown  # and where, by direction, each error lies
+    python -m training.lobe_bound --forward --area  # the forward lobe scaled by the layers' projected areas
 
 The loss is the score itself: the relative L1 error of f |cos wo| over each configuration's stored pairs
 (``validation.lobe_errors``), optionally plus ``--energy`` times the relative error of its energy (the training
@@ -25,12 +27,16 @@ import torch
 from addon.bake import layer_rows, validation
 from addon.bake import spongecake as ms
 from training import train
+from training.spongecake_torch import projected_area
+
+AREA_START = -8.0  # the area exponents' raw start: softplus(-8) = 3e-4, the forward lobe as it is
 
 
-def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward: bool = False) -> np.ndarray:
+def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward: bool = False,
+               area: bool = False) -> np.ndarray:
     """f |cos wo| (C, n_wi, n_wo, 3) of the lobe form, with the forward lobe or without, with its outputs optimised
     per configuration (started from the shipped network's; the forward lobe's from ``train.FORWARD_START`` where that
-    network has none)."""
+    network has none); ``area`` (with ``forward``) adds one exponent per layer to the forward lobe (``area_scaled``)."""
     rows, wi, wo = train.tensors(data)
     truth = train.target(data)
     total = truth.sum(dim=(1, 2, 3)).clamp_min(1e-12)
@@ -39,12 +45,20 @@ def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward
     if forward and start.shape[1] == kept:
         start = np.concatenate([start, np.tile(train.FORWARD_START, (len(start), 1))], axis=1)
     raw = torch.tensor(start if forward else start[:, :kept], dtype=torch.float64, requires_grad=True)
+    exponents = torch.full((len(start), rows.shape[1]), AREA_START, dtype=torch.float64, requires_grad=area)
+    log_areas = log_projected_areas(data) if area else None
 
-    opt = torch.optim.Adam([raw], lr=rate)
+    def lobe_form():
+        predicted = train.predicted_lobe(lambda x: raw, rows, wi, wo)
+        if not area:
+            return predicted
+        return predicted + area_scaled(raw, rows, wi, wo, torch.nn.functional.softplus(exponents), log_areas)
+
+    opt = torch.optim.Adam([raw, exponents] if area else [raw], lr=rate)
     for step in range(steps):
         for group in opt.param_groups:
             group["lr"] = rate * 0.5 * (1.0 + math.cos(math.pi * step / steps)) + 1e-5
-        predicted = train.predicted_lobe(lambda x: raw, rows, wi, wo)
+        predicted = lobe_form()
         lobe = (predicted - truth).abs().sum(dim=(1, 2, 3)) / total
         gained = (predicted.sum(dim=(1, 2, 3)) - truth.sum(dim=(1, 2, 3))).abs() / total
         loss = (lobe + energy * gained).sum()
@@ -52,7 +66,62 @@ def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward
         loss.backward()
         opt.step()
     with torch.no_grad():
-        return train.predicted_lobe(lambda x: raw, rows, wi, wo).cpu().numpy()
+        return lobe_form().cpu().numpy()
+
+
+def log_projected_areas(data: dict) -> torch.Tensor:
+    """log σ_k(wi) σ_k(wo) (C, n_wi n_wo, L) of each layer as given (σ its scatterers' projected area, 1 for hg)."""
+    rows, wi, wo = train.tensors(data)
+    big_wi, big_wo = train.all_pairs(wi, wo)
+    return torch.stack([torch.log(projected_area(train.layer_batch(rows[:, k]), big_wi).clamp_min(1e-12))
+                        + torch.log(projected_area(train.layer_batch(rows[:, k]), big_wo).clamp_min(1e-12))
+                        for k in range(rows.shape[1])], dim=-1)
+
+
+def area_scaled(raw, rows, wi, wo, exponents, log_areas) -> torch.Tensor:
+    """What the forward lobe f_ss(forward) |cos wo| gains (C, n_wi, n_wo, 3) when it is scaled by
+    Π_k (σ_k(wi) σ_k(wo))^p_k, the layers' projected areas to the powers ``exponents`` (C, L) (reciprocal; p = 0
+    keeps it): light that two flakes of one orientation send on close to its own direction is drawn in proportion
+    to the flakes' area seen along it, which an hg lobe of one mean cosine does not follow."""
+    _, weights = ms.decode(raw, rows, train.TorchOps)
+    big_wi, big_wo = train.all_pairs(wi, wo)
+    f = train.forward_lobe(weights, big_wi, big_wo) * big_wo[..., 2:].abs()
+    scale = torch.exp((log_areas * exponents[:, None, :]).sum(-1)).unsqueeze(-1)
+    return ((scale - 1.0) * f).reshape(*wi.shape[:2], wo.shape[1], 3)
+
+
+CONE = 0.9  # cos 25.8°: the cones around the light's own direction and its mirror image in ``regions``
+GRAZING = 0.2  # cos 78.5°: light this close to the surface is counted apart
+
+
+def regions(data: dict) -> dict:
+    """Each stored pair (C, n_wi, n_wo) in exactly one region, the first that holds it: ``forward`` (wo within the
+    cone around the light's direction of travel, -wi), ``mirror`` (within the cone around wi's mirror image),
+    ``grazing`` (light with cos θi below GRAZING), else ``reflection`` or ``transmission``."""
+    wi, wo = data["wi"].astype(float)[:, :, None, :], data["wo"].astype(float)[:, None, :, :]
+    forward = -(wi * wo).sum(-1) > CONE
+    mirror = (wi * wo * np.array([-1.0, -1.0, 1.0])).sum(-1) > CONE
+    grazing = np.broadcast_to(wi[..., 2] < GRAZING, forward.shape)
+    above = np.broadcast_to(wo[..., 2] > 0.0, forward.shape)
+    taken = forward | mirror | grazing
+    return {"forward": forward, "mirror": mirror & ~forward, "grazing": grazing & ~(forward | mirror),
+            "reflection": above & ~taken, "transmission": ~above & ~taken}
+
+
+def error_by_region(data: dict, predicted: np.ndarray) -> dict:
+    """The mean relative lobe error (``validation.lobe_errors``) split by ``regions``: for each, the mean over the
+    scored configurations of the region's summed |predicted - truth| over the configuration's whole lobe (the parts
+    add up to the mean error), and the share of the Monte Carlo lobe the region holds."""
+    truth = data["ms"] * np.abs(data["wo"][:, None, :, 2:])
+    total = truth.sum(axis=(1, 2, 3))
+    keep = total > 1e-3 * total.max()
+    error = np.abs(predicted - truth).sum(-1)
+    safe = np.maximum(total, 1e-12)
+    out = {}
+    for name, where in regions(data).items():
+        out[name] = {"error": float(((error * where).sum(axis=(1, 2)) / safe)[keep].mean()),
+                     "truth": float(((truth.sum(-1) * where).sum(axis=(1, 2)) / safe)[keep].mean())}
+    return out
 
 
 def halved(data: dict) -> dict:
@@ -74,18 +143,27 @@ def main(argv=None) -> int:
     ap.add_argument("--layers", type=int, nargs="+", default=[1, 2], choices=[1, 2])
     ap.add_argument("--forward", action="store_true",
                     help="with the forward lobe (an HG layer's single scattering; without it the paper's form)")
+    ap.add_argument("--area", action="store_true",
+                    help="with --forward: the forward lobe scaled by each layer's projected areas along wi and wo "
+                         "to a power of its own (``area_scaled``; a candidate form, not the add-on's)")
+    ap.add_argument("--breakdown", action="store_true",
+                    help="also split each mean lobe error by the directions it lies in (``regions``)")
     a = ap.parse_args(argv)
+    if a.area and not a.forward:
+        ap.error("--area scales the forward lobe: add --forward")
     torch.set_num_threads(1)
     for n_layers in (1,) if a.halves else a.layers:
         data = validation.load_shards(a.validation, n_layers)
         form = halved(data) if a.halves else data
         for label, predicted in (("network", validation.predicted_lobes(form, energy=False)),
-                                 ("bound", best_lobes(form, a.steps, a.rate, a.energy, a.forward))):
+                                 ("bound", best_lobes(form, a.steps, a.rate, a.energy, a.forward, a.area))):
             scores = validation.lobe_errors(data, predicted)
-            print(json.dumps({"layers": n_layers, "halves": a.halves, "forward": a.forward, "lobes": label,
+            by_region = {"regions": error_by_region(data, predicted)} if a.breakdown else {}
+            print(json.dumps({"layers": n_layers, "halves": a.halves, "forward": a.forward, "area": a.area,
+                              "lobes": label,
                               "steps": a.steps,
                               "energy_weight": a.energy,
-                              **{k: v for k, v in scores.items() if k != "per_config"}}), flush=True)
+                              **{k: v for k, v in scores.items() if k != "per_config"}, **by_region}), flush=True)
     return 0
 
 

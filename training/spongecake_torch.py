@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import torch
 
-__all__ = ["KIND", "LayerBatch", "eval_stack", "from_params"]
+__all__ = ["KIND", "LayerBatch", "eval_stack", "from_params", "projected_area"]
 
 KIND = {"surface": 0, "fiber": 1, "hg": 2}
 SURFACE, FIBER, HG = 0, 1, 2
@@ -175,6 +175,11 @@ def _between(depths, up):
 
 
 # ------------------------------------------------------------------------------------------------ public
+
+def projected_area(layer: LayerBatch, w):
+    """sigma(w) (B, N) of one layer's scatterers along unit directions w (B, N, 3): sqrt(w^T S w), 1 for hg."""
+    return _Layer(layer).sigma(w)
+
 
 def eval_stack(layers: list[LayerBatch], wi, wo):
     """SpongeCake single scattering f(wi, wo), (B, N, 3): see the module docstring."""

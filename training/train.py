@@ -123,26 +123,41 @@ def to_mlp(net: torch.nn.Sequential, manifest: dict) -> mlp.MLP:
 
 # ------------------------------------------------------------------------------------------------ loss
 
+def layer_batch(rows: torch.Tensor) -> LayerBatch:
+    """One layer's rows (B, ROW) as a LayerBatch."""
+    return LayerBatch(kind=rows[:, layer_rows.TYPE].round().long(), roughness=rows[:, layer_rows.ROUGHNESS],
+                      albedo=rows[:, layer_rows.ALBEDO], thickness=rows[:, layer_rows.THICKNESS],
+                      f0=rows[:, layer_rows.F0], orientation=rows[:, layer_rows.ORIENTATION])
+
+
+def all_pairs(wi: torch.Tensor, wo: torch.Tensor):
+    """Every (wi, wo) pair of B configurations' (B, n_wi, 3) and (B, n_wo, 3) directions: two (B, n_wi n_wo, 3)."""
+    b, n_wi, n_wo = wi.shape[0], wi.shape[1], wo.shape[1]
+    return (wi[:, :, None, :].expand(b, n_wi, n_wo, 3).reshape(b, -1, 3),
+            wo[:, None, :, :].expand(b, n_wi, n_wo, 3).reshape(b, -1, 3))
+
+
+def forward_lobe(weights: torch.Tensor, big_wi: torch.Tensor, big_wo: torch.Tensor) -> torch.Tensor:
+    """f_ss(forward) (B, N, 3), no cosine: the decoded weights' forward lobe, one hg layer."""
+    b = weights.shape[0]
+    forward = LayerBatch(kind=torch.full((b,), 2, dtype=torch.long, device=weights.device),
+                         roughness=weights[:, ms.FORWARD_G], albedo=weights[:, ms.FORWARD_ALBEDO],
+                         thickness=weights[:, ms.FORWARD_THICKNESS], f0=torch.ones_like(weights[:, ms.FORWARD_ALBEDO]),
+                         orientation=torch.zeros_like(weights[:, ms.FORWARD_ALBEDO]) + 1.0)  # ignored by hg layers
+    return eval_stack([forward], big_wi, big_wo)
+
+
 def predicted_lobe(net, rows: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
     """W1 f_ss(params') + W2 / pi + f_ss(forward) for B configurations at their (n_wi x n_wo) pairs, times |cos wo|:
     (B, n_wi, n_wo, 3)."""
     x = torch.as_tensor(ms.features(rows.cpu().numpy()), device=rows.device)
     lobe, weights = ms.decode(net(x), rows, TorchOps)
-    layers = [LayerBatch(kind=lobe[:, k, layer_rows.TYPE].round().long(), roughness=lobe[:, k, layer_rows.ROUGHNESS],
-                         albedo=lobe[:, k, layer_rows.ALBEDO], thickness=lobe[:, k, layer_rows.THICKNESS],
-                         f0=lobe[:, k, layer_rows.F0], orientation=lobe[:, k, layer_rows.ORIENTATION])
-              for k in range(rows.shape[1])]
-    b, n_wi, n_wo = wi.shape[0], wi.shape[1], wo.shape[1]
-    big_wi = wi[:, :, None, :].expand(b, n_wi, n_wo, 3).reshape(b, -1, 3)
-    big_wo = wo[:, None, :, :].expand(b, n_wi, n_wo, 3).reshape(b, -1, 3)
-    forward = LayerBatch(kind=torch.full((b,), 2, dtype=torch.long, device=rows.device),
-                         roughness=weights[:, ms.FORWARD_G], albedo=weights[:, ms.FORWARD_ALBEDO],
-                         thickness=weights[:, ms.FORWARD_THICKNESS], f0=torch.ones_like(weights[:, ms.FORWARD_ALBEDO]),
-                         orientation=lobe[:, 0, layer_rows.ORIENTATION])  # ignored by hg layers
-    f = eval_stack(layers, big_wi, big_wo) + eval_stack([forward], big_wi, big_wo)
+    big_wi, big_wo = all_pairs(wi, wo)
+    f = (eval_stack([layer_batch(lobe[:, k]) for k in range(rows.shape[1])], big_wi, big_wo)
+         + forward_lobe(weights, big_wi, big_wo))
     same = ((big_wi[..., 2] > 0) == (big_wo[..., 2] > 0)).unsqueeze(-1)
     lambert = torch.where(same, weights[:, None, ms.W2R], weights[:, None, ms.W2T]) / math.pi
-    return ((f + lambert) * big_wo[..., 2:].abs()).reshape(b, n_wi, n_wo, 3)
+    return ((f + lambert) * big_wo[..., 2:].abs()).reshape(*wi.shape[:2], wo.shape[1], 3)
 
 
 def lobe_loss(net, data: dict, index, rng=None) -> torch.Tensor:

@@ -83,7 +83,7 @@ def predict(net: mlp.MLP, rho, z, theta, phi, albedo, g) -> np.ndarray:
     return np.maximum(np.expm1(_in_blocks(net, x)[:, 0]), 0.0) * m.get("phi_0", 1.0) * a ** m.get("albedo_power", 0)
 
 
-BLOCK = 16384  # rows a network evaluates at once: a block's hidden activations stay in the cache
+BLOCK = 16384  # rows a network evaluates at once (16384 rows × 50 hidden × 8 B: 6.5 MB of activations)
 
 
 def _in_blocks(net: mlp.MLP, x: np.ndarray) -> np.ndarray:

@@ -317,7 +317,56 @@ def test_a_warm_start_goes_on_from_the_exported_network(n_layers):
         train.warm_start(train.make_network(n_layers), train.to_mlp(train.make_network(3 - n_layers), {}))
 
 
-@pytest.mark.parametrize("form", ["lobe", "halves", "forward"])
+def test_the_lobe_bound_splits_each_error_by_direction_into_parts_that_add_up_to_it():
+    """``lobe_bound.error_by_region``: every stored pair lies in one region, the regions' errors add up to the mean
+    lobe error and their truths to the whole lobe, and an error made only around the light's direction of travel is
+    counted there and nowhere else."""
+    from training import lobe_bound
+
+    data = {k: v[:4] for k, v in validation.load_shards(VALIDATION, 1).items() if k != "meta"}
+    counted = sum(where.astype(int) for where in lobe_bound.regions(data).values())
+    assert (counted == 1).all()
+    predicted = validation.predicted_lobes(data, energy=False)
+    parts = lobe_bound.error_by_region(data, predicted)
+    scores = validation.lobe_errors(data, predicted)
+    assert sum(p["error"] for p in parts.values()) == pytest.approx(scores["mean_relative_lobe_error"], rel=1e-9)
+    assert sum(p["truth"] for p in parts.values()) == pytest.approx(1.0, rel=1e-9)
+
+    truth = data["ms"] * np.abs(data["wo"][:, None, :, 2:])
+    forward = lobe_bound.regions(data)["forward"]
+    assert forward.any()
+    parts = lobe_bound.error_by_region(data, np.where(forward[..., None], 2.0 * truth + 0.01, truth))
+    assert parts["forward"]["error"] > 0.0
+    assert all(p["error"] == 0.0 for name, p in parts.items() if name != "forward")
+
+
+def test_the_area_scaled_forward_lobe_is_the_forward_lobe_times_the_layers_projected_areas_to_their_powers():
+    """``lobe_bound.area_scaled``: exponents 0 add nothing; exponent p on a flake layer scales the forward lobe by
+    (σ(wi) σ(wo))^p, σ the reference's projected area of that layer."""
+    from training import lobe_bound
+
+    data = {k: v[:3] for k, v in validation.load_shards(VALIDATION, 1).items() if k != "meta"}
+    flake = next(c for c, rows in enumerate(data["rows"]) if rows[0, layer_rows.TYPE] < 1.5)
+    data = {k: v[flake:flake + 1] for k, v in data.items()}
+    rows, wi, wo = train.tensors(data)
+    raw = torch.zeros((1, train.outputs(1)), dtype=torch.float64)
+    raw[0, -ms.FORWARD_OUTPUTS:] = torch.tensor((0.7, 0.3, -1.0, 2.0, -0.4))
+    log_areas = lobe_bound.log_projected_areas(data)
+    none = lobe_bound.area_scaled(raw, rows, wi, wo, torch.zeros((1, 1), dtype=torch.float64), log_areas)
+    assert (none == 0.0).all()
+
+    gained = lobe_bound.area_scaled(raw, rows, wi, wo, torch.full((1, 1), 1.5, dtype=torch.float64), log_areas)
+    params = layer_rows.params_from_rows(data["rows"][0])
+    big_wi, big_wo = (np.asarray(w, dtype=float) for w in (np.repeat(data["wi"][0], len(data["wo"][0]), axis=0),
+                                                           np.tile(data["wo"][0], (len(data["wi"][0]), 1))))
+    weights = ms.decode(raw.numpy(), data["rows"].astype(float))[1][0]
+    forward = ref.eval(ms.forward_params(weights), big_wi, big_wo) * np.abs(big_wo[:, 2:])
+    areas = (ref._sigma(params.layers[0], big_wi) * ref._sigma(params.layers[0], big_wo))[:, None]
+    np.testing.assert_allclose(gained[0].numpy().reshape(-1, 3), (areas ** 1.5 - 1.0) * forward, rtol=1e-9,
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize("form", ["lobe", "halves", "forward", "area"])
 def test_the_lobe_bound_fits_each_held_out_configuration_closer_than_the_network(form):
     """``training.lobe_bound`` optimises the lobe form per configuration from the network's prediction: on a few
     held-out stacks it ends below the error it starts from (a bound that did not move would say nothing), the halves
@@ -346,6 +395,7 @@ def test_the_lobe_bound_fits_each_held_out_configuration_closer_than_the_network
         expected = ref.eval(ms.forward_params(weights), *pairs) * np.abs(pairs[1][:, 2:])
         np.testing.assert_allclose((lobe - lobe0).reshape(-1, 3), expected, rtol=1e-9, atol=1e-12)
     start, bound = (validation.lobe_errors(data, lobe_bound.best_lobes(halves, steps=steps, rate=0.02,
-                                                                       forward=form == "forward"))
+                                                                       forward=form in ("forward", "area"),
+                                                                       area=form == "area"))
                     for steps in (0, 60))
     assert bound["mean_relative_lobe_error"] < start["mean_relative_lobe_error"] - 0.02
