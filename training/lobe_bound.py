@@ -27,16 +27,16 @@ import torch
 from addon.bake import layer_rows, validation
 from addon.bake import spongecake as ms
 from training import train
-from training.spongecake_torch import projected_area
-
-AREA_START = -8.0  # the area exponents' raw start: softplus(-8) = 3e-4, the forward lobe as it is
 
 
 def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward: bool = False,
                area: bool = False) -> np.ndarray:
     """f |cos wo| (C, n_wi, n_wo, 3) of the lobe form, with the forward lobe or without, with its outputs optimised
     per configuration (started from the shipped network's; the forward lobe's from ``train.FORWARD_START`` where that
-    network has none); ``area`` (with ``forward``) adds one exponent per layer to the forward lobe (``area_scaled``)."""
+    network has none); ``area`` (with ``forward``) adds one exponent per layer (``train.area_scale``), started from
+    ``train.AREA_START``."""
+    if area and not forward:
+        raise ValueError("the area exponents scale the forward lobe: area needs forward")
     rows, wi, wo = train.tensors(data)
     truth = train.target(data)
     total = truth.sum(dim=(1, 2, 3)).clamp_min(1e-12)
@@ -44,21 +44,15 @@ def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward
     kept = train.outputs(rows.shape[1]) - ms.FORWARD_OUTPUTS
     if forward and start.shape[1] == kept:
         start = np.concatenate([start, np.tile(train.FORWARD_START, (len(start), 1))], axis=1)
+    if area:
+        start = np.concatenate([start, np.full((len(start), rows.shape[1]), train.AREA_START)], axis=1)
     raw = torch.tensor(start if forward else start[:, :kept], dtype=torch.float64, requires_grad=True)
-    exponents = torch.full((len(start), rows.shape[1]), AREA_START, dtype=torch.float64, requires_grad=area)
-    log_areas = log_projected_areas(data) if area else None
 
-    def lobe_form():
-        predicted = train.predicted_lobe(lambda x: raw, rows, wi, wo)
-        if not area:
-            return predicted
-        return predicted + area_scaled(raw, rows, wi, wo, torch.nn.functional.softplus(exponents), log_areas)
-
-    opt = torch.optim.Adam([raw, exponents] if area else [raw], lr=rate)
+    opt = torch.optim.Adam([raw], lr=rate)
     for step in range(steps):
         for group in opt.param_groups:
             group["lr"] = rate * 0.5 * (1.0 + math.cos(math.pi * step / steps)) + 1e-5
-        predicted = lobe_form()
+        predicted = train.predicted_lobe(lambda x: raw, rows, wi, wo)
         lobe = (predicted - truth).abs().sum(dim=(1, 2, 3)) / total
         gained = (predicted.sum(dim=(1, 2, 3)) - truth.sum(dim=(1, 2, 3))).abs() / total
         loss = (lobe + energy * gained).sum()
@@ -66,28 +60,7 @@ def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward
         loss.backward()
         opt.step()
     with torch.no_grad():
-        return lobe_form().cpu().numpy()
-
-
-def log_projected_areas(data: dict) -> torch.Tensor:
-    """log σ_k(wi) σ_k(wo) (C, n_wi n_wo, L) of each layer as given (σ its scatterers' projected area, 1 for hg)."""
-    rows, wi, wo = train.tensors(data)
-    big_wi, big_wo = train.all_pairs(wi, wo)
-    return torch.stack([torch.log(projected_area(train.layer_batch(rows[:, k]), big_wi).clamp_min(1e-12))
-                        + torch.log(projected_area(train.layer_batch(rows[:, k]), big_wo).clamp_min(1e-12))
-                        for k in range(rows.shape[1])], dim=-1)
-
-
-def area_scaled(raw, rows, wi, wo, exponents, log_areas) -> torch.Tensor:
-    """What the forward lobe f_ss(forward) |cos wo| gains (C, n_wi, n_wo, 3) when it is scaled by
-    Π_k (σ_k(wi) σ_k(wo))^p_k, the layers' projected areas to the powers ``exponents`` (C, L) (reciprocal; p = 0
-    keeps it): light that two flakes of one orientation send on close to its own direction is drawn in proportion
-    to the flakes' area seen along it, which an hg lobe of one mean cosine does not follow."""
-    _, weights = ms.decode(raw, rows, train.TorchOps)
-    big_wi, big_wo = train.all_pairs(wi, wo)
-    f = train.forward_lobe(weights, big_wi, big_wo) * big_wo[..., 2:].abs()
-    scale = torch.exp((log_areas * exponents[:, None, :]).sum(-1)).unsqueeze(-1)
-    return ((scale - 1.0) * f).reshape(*wi.shape[:2], wo.shape[1], 3)
+        return train.predicted_lobe(lambda x: raw, rows, wi, wo).cpu().numpy()
 
 
 CONE = 0.9  # cos 25.8°: the cones around the light's own direction and its mirror image in ``regions``
@@ -145,7 +118,7 @@ def main(argv=None) -> int:
                     help="with the forward lobe (an HG layer's single scattering; without it the paper's form)")
     ap.add_argument("--area", action="store_true",
                     help="with --forward: the forward lobe scaled by each layer's projected areas along wi and wo "
-                         "to a power of its own (``area_scaled``; a candidate form, not the add-on's)")
+                         "to a power of its own (``train.area_scale``; a candidate form, not the add-on's)")
     ap.add_argument("--breakdown", action="store_true",
                     help="also split each mean lobe error by the directions it lies in (``regions``)")
     a = ap.parse_args(argv)

@@ -12,6 +12,11 @@ independently seeded validation set (tests/data) is scored at export and its err
 
     python -m training.train --data ~/.cache/lamina/spongecake-ms --layers 1 --threads 1 --minutes 30 --out addon/bake/weights
     python -m training.train --data /tmp/quick --quick --out /tmp/weights             # seconds, for tests
+
+``--area`` trains a candidate form, not the add-on's: the forward lobe scaled by the layers' projected areas along
+wi and wo, each to a power the network predicts (``area_scaled``; one output per layer after the others;
+docs/training.md measures the form's bound). The add-on refuses such weights (``addon.bake.spongecake.decode``), so
+their held-out scores are the training form's (``record_held_out``).
 """
 from __future__ import annotations
 
@@ -31,7 +36,7 @@ import torch
 from addon.bake import layer_rows, mlp, validation
 from addon.bake import spongecake as ms
 from training import dataset
-from training.spongecake_torch import LayerBatch, eval_stack
+from training.spongecake_torch import LayerBatch, eval_stack, projected_area
 
 HIDDEN = (128, 128, 128)
 LEARNING_RATE = 1e-3
@@ -69,10 +74,12 @@ class TorchOps:
 
 # The forward lobe's raw outputs at the start: g = 0.98 tanh(1) = 0.75, albedo softplus(-5) ≈ 0.007, T rho 1.
 FORWARD_START = (1.0, -5.0, -5.0, -5.0, 0.0)
+AREA_START = -8.0  # the area exponents' raw start (``--area``): softplus(-8) = 3e-4, the forward lobe as it is
 
 
-def outputs(n_layers: int) -> int:
-    return n_layers * ms.OUTPUTS + ms.WEIGHT_OUTPUTS + ms.FORWARD_OUTPUTS
+def outputs(n_layers: int, area: bool = False) -> int:
+    """Raw outputs of a network for ``n_layers``: the add-on's, plus one area exponent per layer with ``area``."""
+    return n_layers * ms.OUTPUTS + ms.WEIGHT_OUTPUTS + ms.FORWARD_OUTPUTS + (n_layers if area else 0)
 
 
 def silu_mlp(sizes) -> torch.nn.Sequential:
@@ -88,27 +95,32 @@ def silu_mlp(sizes) -> torch.nn.Sequential:
     return torch.nn.Sequential(*modules)
 
 
-def make_network(n_layers: int) -> torch.nn.Sequential:
-    net = silu_mlp((n_layers * ms.FEATURES, *HIDDEN, outputs(n_layers)))
+def make_network(n_layers: int, area: bool = False) -> torch.nn.Sequential:
+    net = silu_mlp((n_layers * ms.FEATURES, *HIDDEN, outputs(n_layers, area)))
     last = net[-1]
+    forward = n_layers * ms.OUTPUTS + ms.WEIGHT_OUTPUTS
     with torch.no_grad():
         last.bias.zero_()
-        last.bias[-ms.WEIGHT_OUTPUTS - ms.FORWARD_OUTPUTS:] = -5.0  # start with small lobes
-        last.bias[-ms.FORWARD_OUTPUTS:] = torch.tensor(FORWARD_START)
+        last.bias[n_layers * ms.OUTPUTS:forward] = -5.0  # start with small lobes
+        last.bias[forward:forward + ms.FORWARD_OUTPUTS] = torch.tensor(FORWARD_START)
+        last.bias[outputs(n_layers):] = AREA_START
     return net.double().to(DEVICE)
 
 
 def warm_start(net: torch.nn.Sequential, shipped: mlp.MLP) -> None:
     """Load an exported network's weights into ``net`` (training goes on from it). A network exported before the
-    forward lobe has FORWARD_OUTPUTS fewer outputs: those start as ``make_network`` starts them, so the warm-started
-    network predicts what ``shipped`` predicts, plus a faint forward lobe (albedo about 0.007)."""
+    forward lobe has FORWARD_OUTPUTS fewer outputs, one without the area exponents (``--area``) one per layer fewer:
+    those start as ``make_network`` starts them, so the warm-started network predicts what ``shipped`` predicts, plus
+    a faint forward lobe (albedo about 0.007) and areas to the power 3e-4."""
     linears = [m for m in net if isinstance(m, torch.nn.Linear)]
     sizes = [(m.weight.shape[1], m.weight.shape[0]) for m in linears]
     shipped_sizes = [w.shape for w in shipped.weights]
-    without_forward = sizes[:-1] + [(sizes[-1][0], sizes[-1][1] - ms.FORWARD_OUTPUTS)]
-    if shipped_sizes not in (sizes, without_forward):
+    n_layers = sizes[0][0] // ms.FEATURES
+    ends = [n_layers * ms.OUTPUTS + ms.WEIGHT_OUTPUTS, outputs(n_layers), outputs(n_layers, area=True)]
+    known = [sizes[:-1] + [(sizes[-1][0], end)] for end in ends if end <= sizes[-1][1]]
+    if shipped_sizes not in known:
         raise ValueError(f"the warm-start network's layers {shipped_sizes} are neither this network's {sizes} nor "
-                         f"those without the forward lobe")
+                         f"those without the forward lobe or the area exponents")
     with torch.no_grad():
         for m, w, b in zip(linears, shipped.weights, shipped.biases):
             m.weight[:w.shape[1]] = torch.as_tensor(w.T)
@@ -147,14 +159,29 @@ def forward_lobe(weights: torch.Tensor, big_wi: torch.Tensor, big_wo: torch.Tens
     return eval_stack([forward], big_wi, big_wo)
 
 
+def area_scale(rows: torch.Tensor, exponents: torch.Tensor, big_wi: torch.Tensor, big_wo: torch.Tensor):
+    """Π_k (σ_k(wi) σ_k(wo))^p_k (B, N): the layers' projected areas (``rows`` as given; 1 for hg layers) to the
+    powers ``exponents`` (B, L). Reciprocal; exponents 0 give 1."""
+    log_areas = sum(exponents[:, k:k + 1] * (torch.log(projected_area(layer_batch(rows[:, k]), big_wi).clamp_min(1e-12))
+                                             + torch.log(projected_area(layer_batch(rows[:, k]), big_wo).clamp_min(1e-12)))
+                    for k in range(rows.shape[1]))
+    return torch.exp(log_areas)
+
+
 def predicted_lobe(net, rows: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
     """W1 f_ss(params') + W2 / pi + f_ss(forward) for B configurations at their (n_wi x n_wo) pairs, times |cos wo|:
-    (B, n_wi, n_wo, 3)."""
+    (B, n_wi, n_wo, 3); a network with the area exponents (``--area``) scales the forward lobe by ``area_scale``
+    (light that two flakes of one orientation send on close to its own direction grows with the flakes' area seen
+    along it, which an hg lobe of one mean cosine does not follow)."""
     x = torch.as_tensor(ms.features(rows.cpu().numpy()), device=rows.device)
-    lobe, weights = ms.decode(net(x), rows, TorchOps)
+    raw = net(x)
+    kept = outputs(rows.shape[1])
+    lobe, weights = ms.decode(raw[:, :kept], rows, TorchOps)
     big_wi, big_wo = all_pairs(wi, wo)
-    f = (eval_stack([layer_batch(lobe[:, k]) for k in range(rows.shape[1])], big_wi, big_wo)
-         + forward_lobe(weights, big_wi, big_wo))
+    forward = forward_lobe(weights, big_wi, big_wo)
+    if raw.shape[1] > kept:
+        forward = forward * area_scale(rows, torch.nn.functional.softplus(raw[:, kept:]), big_wi, big_wo).unsqueeze(-1)
+    f = eval_stack([layer_batch(lobe[:, k]) for k in range(rows.shape[1])], big_wi, big_wo) + forward
     same = ((big_wi[..., 2] > 0) == (big_wo[..., 2] > 0)).unsqueeze(-1)
     lambert = torch.where(same, weights[:, None, ms.W2R], weights[:, None, ms.W2T]) / math.pi
     return ((f + lambert) * big_wo[..., 2:].abs()).reshape(*wi.shape[:2], wo.shape[1], 3)
@@ -233,16 +260,16 @@ def cosine_step(opt, loss, base_rate: float, frac: float) -> None:
 
 
 def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int = 32, init: mlp.MLP | None = None,
-          log=print):
+          log=print, area: bool = False):
     """Train for ``minutes``, from ``make_network``'s start or, with ``init``, from an exported network
     (``warm_start``); returns the network at its best split-validation loss (checked every few seconds) and what
-    happened."""
+    happened. ``area``: the candidate form with the area exponents (module docstring)."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     order = rng.permutation(len(data["rows"]))
     n_val = max(1, len(order) // 10)
     val, train_idx = order[:n_val], order[n_val:]
-    net = make_network(n_layers)
+    net = make_network(n_layers, area)
     if init is not None:
         warm_start(net, init)
     opt = torch.optim.AdamW(net.parameters(), lr=LEARNING_RATE, weight_decay=WEIGHT_DECAY)
@@ -275,12 +302,19 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
 
 def record_held_out(path: Path, held_out: Path) -> dict:
     """Score the exported weights file on the held-out set exactly as the add-on runs it (numpy, float32
-    weights, the viewer-side choice of prediction) and record the result in its manifest."""
+    weights, the viewer-side choice of prediction) and record the result in its manifest; weights with the area
+    exponents, which the add-on does not run, by the training form (``predicted_lobe``, torch, the same float32
+    weights)."""
     mlp.load.cache_clear()
     shipped = mlp.load(path)
     n_layers = shipped.manifest["layers"]
     data = dataset.load(held_out, n_layers)
-    scores = validation.lobe_errors(data, validation.predicted_lobes(data, shipped))
+    if shipped.weights[-1].shape[1] > outputs(n_layers):
+        net = make_network(n_layers, area=True)
+        warm_start(net, shipped)
+        scores = lobe_errors(net, data)
+    else:
+        scores = validation.lobe_errors(data, validation.predicted_lobes(data, shipped))
     manifest = {**shipped.manifest, "held_out_validation": {k: v for k, v in scores.items() if k != "per_config"},
                 "held_out_per_config": scores["per_config"]}
     mlp.save(path, shipped.weights, shipped.biases, manifest)
@@ -308,7 +342,8 @@ def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path
     split = {k: v for k, v in lobe_errors(net, val).items() if k != "per_config"}
     manifest = {
         "model": "spongecake multiple scattering", "layers": n_layers, "inputs": n_layers * ms.FEATURES,
-        "hidden": list(HIDDEN), "activation": "silu", "outputs": outputs(n_layers),
+        "hidden": list(HIDDEN), "activation": "silu", "outputs": int(net[-1].bias.shape[0]),
+        "area_exponents": int(net[-1].bias.shape[0]) > outputs(n_layers),
         "training_configs": info["train_configs"], "pairs_per_config": int(data["ms"].shape[1] * data["ms"].shape[2]),
         "paths_per_wi": metas[0]["paths"], "max_depth": metas[0]["max_depth"], "dataset_seed": metas[0]["seed"],
         "dataset_version": metas[0]["version"], "epochs": info["epochs"], "steps": info["steps"], "best_step": info["best_step"],
@@ -343,6 +378,9 @@ def main(argv=None) -> int:
     ap.add_argument("--batch", type=int, default=32, help="configurations per mini-batch")
     ap.add_argument("--init", type=Path, help="folder of exported weights to go on training from (warm start; a "
                     "network without the forward lobe gets its outputs added), recorded in the manifest")
+    ap.add_argument("--area", action="store_true",
+                    help="train the candidate form with the forward lobe scaled by the layers' projected areas (one "
+                         "more output per layer; the add-on refuses such weights)")
     ap.add_argument("--quick", action="store_true", help="a few seconds of training (tests)")
     ap.add_argument("--rescore", action="store_true",
                     help="only re-score the weights in --out on --validation and record it in their manifests")
@@ -370,7 +408,8 @@ def main(argv=None) -> int:
         print(f"training the {n_layers}-layer network on {len(data['rows'])} configurations for {minutes} min",
               flush=True)
         init = mlp.load(Path(a.init) / ms.weights_path(n_layers).name) if a.init else None
-        net, info = train(data, n_layers, minutes, seed=a.seed, batch=4 if a.quick else a.batch, init=init)
+        net, info = train(data, n_layers, minutes, seed=a.seed, batch=4 if a.quick else a.batch, init=init,
+                          area=a.area)
         if init is not None:
             info["init"] = {k: init.manifest.get(k) for k in ("training_configs", "steps", "training_seconds", "date",
                                                                "code_version", "held_out_validation", "outputs")}

@@ -183,6 +183,10 @@ def decode(raw, rows, ops=NumpyOps):
     parameter is a residual on the layer's own value (a zero output keeps it), moved in an unbounded coordinate: the
     logit of albedo and f0, of the log-position of α and Tρ in their ranges, atanh of g."""
     n_layers = rows.shape[1]
+    known = (n_layers * OUTPUTS + WEIGHT_OUTPUTS, n_layers * OUTPUTS + WEIGHT_OUTPUTS + FORWARD_OUTPUTS)
+    if raw.shape[1] not in known:
+        raise ValueError(f"a {n_layers}-layer network has {known[0]} or {known[1]} outputs, this one {raw.shape[1]} "
+                         f"(weights trained with training.train --area, a form the add-on does not evaluate?)")
     layers = []
     weights = ops.softplus(raw[:, n_layers * OUTPUTS:n_layers * OUTPUTS + WEIGHT_OUTPUTS])
     for k in range(n_layers):

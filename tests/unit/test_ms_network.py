@@ -1,6 +1,7 @@
 """SpongeCake multiple scattering: numpy inference against the torch training code, the quick train → export →
 load pipeline, the shipped weights against their recorded validation errors, and the prediction's symmetries."""
 import json
+import math
 import shutil
 
 import numpy as np
@@ -127,6 +128,13 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
                       + 1e-4 * scale)
     assert train.main(["--quick", "--data", str(packed), "--out", str(tmp_path / "from-pack"), "--validation",
                        str(data_dir), "--threads", "1", "--layers", "1"]) == 0
+    area = tmp_path / "area"  # the candidate form: one more output, scored by the training form
+    assert train.main(["--quick", "--data", str(data_dir), "--out", str(area), "--validation", str(data_dir),
+                       "--threads", "1", "--layers", "1", "--init", str(weights), "--area"]) == 0
+    manifest = mlp.load(area / ms.weights_path(1).name).manifest
+    assert manifest["area_exponents"] and manifest["outputs"] == train.outputs(1, area=True)
+    assert 0.0 < manifest["held_out_validation"]["mean_relative_lobe_error"] < 10.0
+    assert not mlp.load(weights / ms.weights_path(1).name).manifest["area_exponents"]
     mlp.load.cache_clear()
     ms.predict.cache_clear()
 
@@ -340,30 +348,34 @@ def test_the_lobe_bound_splits_each_error_by_direction_into_parts_that_add_up_to
     assert all(p["error"] == 0.0 for name, p in parts.items() if name != "forward")
 
 
-def test_the_area_scaled_forward_lobe_is_the_forward_lobe_times_the_layers_projected_areas_to_their_powers():
-    """``lobe_bound.area_scaled``: exponents 0 add nothing; exponent p on a flake layer scales the forward lobe by
-    (σ(wi) σ(wo))^p, σ the reference's projected area of that layer."""
-    from training import lobe_bound
-
+def test_the_area_exponents_scale_the_forward_lobe_by_the_layers_projected_areas_to_their_powers():
+    """``train.predicted_lobe`` of a network with the area exponents (``--area``): an exponent near 0 keeps the
+    forward lobe; exponent p on a flake layer scales it by (σ(wi) σ(wo))^p, σ the reference's projected area of that
+    layer; everything else is the network's without them. The add-on refuses such outputs."""
     data = {k: v[:3] for k, v in validation.load_shards(VALIDATION, 1).items() if k != "meta"}
     flake = next(c for c, rows in enumerate(data["rows"]) if rows[0, layer_rows.TYPE] < 1.5)
     data = {k: v[flake:flake + 1] for k, v in data.items()}
     rows, wi, wo = train.tensors(data)
-    raw = torch.zeros((1, train.outputs(1)), dtype=torch.float64)
-    raw[0, -ms.FORWARD_OUTPUTS:] = torch.tensor((0.7, 0.3, -1.0, 2.0, -0.4))
-    log_areas = lobe_bound.log_projected_areas(data)
-    none = lobe_bound.area_scaled(raw, rows, wi, wo, torch.zeros((1, 1), dtype=torch.float64), log_areas)
-    assert (none == 0.0).all()
+    raw = torch.zeros((1, train.outputs(1, area=True)), dtype=torch.float64)
+    raw[0, train.outputs(1) - ms.FORWARD_OUTPUTS:train.outputs(1)] = torch.tensor((0.7, 0.3, -1.0, 2.0, -0.4))
 
-    gained = lobe_bound.area_scaled(raw, rows, wi, wo, torch.full((1, 1), 1.5, dtype=torch.float64), log_areas)
+    def lobe(exponent_raw):
+        raw[0, -1] = exponent_raw
+        return train.predicted_lobe(lambda x: raw, rows, wi, wo)[0].numpy().reshape(-1, 3)
+
+    without = train.predicted_lobe(lambda x: raw[:, :train.outputs(1)], rows, wi, wo)[0].numpy().reshape(-1, 3)
+    np.testing.assert_allclose(lobe(-60.0), without, rtol=1e-12, atol=1e-15)
     params = layer_rows.params_from_rows(data["rows"][0])
-    big_wi, big_wo = (np.asarray(w, dtype=float) for w in (np.repeat(data["wi"][0], len(data["wo"][0]), axis=0),
-                                                           np.tile(data["wo"][0], (len(data["wi"][0]), 1))))
-    weights = ms.decode(raw.numpy(), data["rows"].astype(float))[1][0]
+    big_wi = np.repeat(data["wi"][0], len(data["wo"][0]), axis=0).astype(float)
+    big_wo = np.tile(data["wo"][0], (len(data["wi"][0]), 1)).astype(float)
+    weights = ms.decode(raw[:, :train.outputs(1)].numpy(), data["rows"].astype(float))[1][0]
     forward = ref.eval(ms.forward_params(weights), big_wi, big_wo) * np.abs(big_wo[:, 2:])
     areas = (ref._sigma(params.layers[0], big_wi) * ref._sigma(params.layers[0], big_wo))[:, None]
-    np.testing.assert_allclose(gained[0].numpy().reshape(-1, 3), (areas ** 1.5 - 1.0) * forward, rtol=1e-9,
+    assert areas.max() > 4.0 * areas.min()  # a layer whose area changes with the direction
+    np.testing.assert_allclose(lobe(math.log(math.expm1(1.5))) - without, (areas ** 1.5 - 1.0) * forward, rtol=1e-9,
                                atol=1e-12)
+    with pytest.raises(ValueError, match="--area"):
+        ms.decode(raw.numpy(), data["rows"].astype(float))
 
 
 @pytest.mark.parametrize("form", ["lobe", "halves", "forward", "area"])
