@@ -8,7 +8,7 @@ bound is the lobe form's own (issue 15's goal of 25% mean lobe error is measured
     python -m training.lobe_bound --halves   # one layer, as two identical halves through the two-layer form
     python -m training.lobe_bound --forward  # with the forward lobe (an HG layer's single scattering)
     python -m training.lobe_bound --forward --breakdown  # and where, by direction, each error lies
-    python -m training.lobe_bound --forward --area  # the forward lobe scaled by the layers' projected areas
+    python -m training.lobe_bound --area     # the forward lobe scaled by the layers' projected areas
 
 The loss is the score itself: the relative L1 error of f |cos wo| over each configuration's stored pairs
 (``validation.lobe_errors``), optionally plus ``--energy`` times the relative error of its energy (the training
@@ -33,10 +33,9 @@ def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward
                area: bool = False) -> np.ndarray:
     """f |cos wo| (C, n_wi, n_wo, 3) of the lobe form, with the forward lobe or without, with its outputs optimised
     per configuration (started from the shipped network's; the forward lobe's from ``train.FORWARD_START`` where that
-    network has none); ``area`` (with ``forward``) adds one exponent per layer (``train.area_scale``), started from
-    ``train.AREA_START``."""
-    if area and not forward:
-        raise ValueError("the area exponents scale the forward lobe: area needs forward")
+    network has none); ``area`` (and so the forward lobe) adds one exponent per layer (``train.area_scale``), started
+    from ``train.AREA_START``."""
+    forward = forward or area
     rows, wi, wo = train.tensors(data)
     truth = train.target(data)
     total = truth.sum(dim=(1, 2, 3)).clamp_min(1e-12)
@@ -85,9 +84,7 @@ def error_by_region(data: dict, predicted: np.ndarray) -> dict:
     """The mean relative lobe error (``validation.lobe_errors``) split by ``regions``: for each, the mean over the
     scored configurations of the region's summed |predicted - truth| over the configuration's whole lobe (the parts
     add up to the mean error), and the share of the Monte Carlo lobe the region holds."""
-    truth = data["ms"] * np.abs(data["wo"][:, None, :, 2:])
-    total = truth.sum(axis=(1, 2, 3))
-    keep = total > 1e-3 * total.max()
+    truth, total, keep = validation.scored_lobes(data)
     error = np.abs(predicted - truth).sum(-1)
     safe = np.maximum(total, 1e-12)
     out = {}
@@ -117,13 +114,11 @@ def main(argv=None) -> int:
     ap.add_argument("--forward", action="store_true",
                     help="with the forward lobe (an HG layer's single scattering; without it the paper's form)")
     ap.add_argument("--area", action="store_true",
-                    help="with --forward: the forward lobe scaled by each layer's projected areas along wi and wo "
+                    help="the forward lobe (--forward implied) scaled by each layer's projected areas along wi and wo "
                          "to a power of its own (``train.area_scale``; a candidate form, not the add-on's)")
     ap.add_argument("--breakdown", action="store_true",
                     help="also split each mean lobe error by the directions it lies in (``regions``)")
     a = ap.parse_args(argv)
-    if a.area and not a.forward:
-        ap.error("--area scales the forward lobe: add --forward")
     torch.set_num_threads(1)
     for n_layers in (1,) if a.halves else a.layers:
         data = validation.load_shards(a.validation, n_layers)
@@ -132,7 +127,7 @@ def main(argv=None) -> int:
                                  ("bound", best_lobes(form, a.steps, a.rate, a.energy, a.forward, a.area))):
             scores = validation.lobe_errors(data, predicted)
             by_region = {"regions": error_by_region(data, predicted)} if a.breakdown else {}
-            print(json.dumps({"layers": n_layers, "halves": a.halves, "forward": a.forward, "area": a.area,
+            print(json.dumps({"layers": n_layers, "halves": a.halves, "forward": a.forward or a.area, "area": a.area,
                               "lobes": label,
                               "steps": a.steps,
                               "energy_weight": a.energy,

@@ -14,7 +14,7 @@ independently seeded validation set (tests/data) is scored at export and its err
     python -m training.train --data /tmp/quick --quick --out /tmp/weights             # seconds, for tests
 
 ``--area`` trains a candidate form, not the add-on's: the forward lobe scaled by the layers' projected areas along
-wi and wo, each to a power the network predicts (``area_scaled``; one output per layer after the others;
+wi and wo, each to a power the network predicts (``area_scale``; one output per layer after the others;
 docs/training.md measures the form's bound). The add-on refuses such weights (``addon.bake.spongecake.decode``), so
 their held-out scores are the training form's (``record_held_out``).
 """
@@ -155,17 +155,19 @@ def forward_lobe(weights: torch.Tensor, big_wi: torch.Tensor, big_wo: torch.Tens
     forward = LayerBatch(kind=torch.full((b,), 2, dtype=torch.long, device=weights.device),
                          roughness=weights[:, ms.FORWARD_G], albedo=weights[:, ms.FORWARD_ALBEDO],
                          thickness=weights[:, ms.FORWARD_THICKNESS], f0=torch.ones_like(weights[:, ms.FORWARD_ALBEDO]),
-                         orientation=torch.zeros_like(weights[:, ms.FORWARD_ALBEDO]) + 1.0)  # ignored by hg layers
+                         orientation=torch.ones_like(weights[:, ms.FORWARD_ALBEDO]))  # ignored by hg layers
     return eval_stack([forward], big_wi, big_wo)
 
 
 def area_scale(rows: torch.Tensor, exponents: torch.Tensor, big_wi: torch.Tensor, big_wo: torch.Tensor):
     """Π_k (σ_k(wi) σ_k(wo))^p_k (B, N): the layers' projected areas (``rows`` as given; 1 for hg layers) to the
     powers ``exponents`` (B, L). Reciprocal; exponents 0 give 1."""
-    log_areas = sum(exponents[:, k:k + 1] * (torch.log(projected_area(layer_batch(rows[:, k]), big_wi).clamp_min(1e-12))
-                                             + torch.log(projected_area(layer_batch(rows[:, k]), big_wo).clamp_min(1e-12)))
-                    for k in range(rows.shape[1]))
-    return torch.exp(log_areas)
+    log_scale = 0.0
+    for k in range(rows.shape[1]):
+        layer = layer_batch(rows[:, k])
+        areas = projected_area(layer, big_wi) * projected_area(layer, big_wo)
+        log_scale = log_scale + exponents[:, k:k + 1] * torch.log(areas.clamp_min(1e-12))
+    return torch.exp(log_scale)
 
 
 def predicted_lobe(net, rows: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
@@ -300,23 +302,26 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
                  "train_configs": int(len(train_idx)), "split_validation_configs": int(n_val), "val_index": val}
 
 
-def record_held_out(path: Path, held_out: Path) -> dict:
+def record_held_out(path: Path, held_out: Path, training_form: bool = False) -> dict:
     """Score the exported weights file on the held-out set exactly as the add-on runs it (numpy, float32
-    weights, the viewer-side choice of prediction) and record the result in its manifest; weights with the area
-    exponents, which the add-on does not run, by the training form (``predicted_lobe``, torch, the same float32
-    weights)."""
+    weights, the viewer-side choice of prediction) and record the result in its manifest; with ``training_form``,
+    and always for weights with the area exponents (which the add-on does not run), as training scores it
+    (``predicted_lobe``: torch, the same float32 weights, the prediction from above for every wo). The manifest's
+    ``held_out_scored_by`` says which."""
     mlp.load.cache_clear()
     shipped = mlp.load(path)
     n_layers = shipped.manifest["layers"]
     data = dataset.load(held_out, n_layers)
-    if shipped.weights[-1].shape[1] > outputs(n_layers):
-        net = make_network(n_layers, area=True)
+    area = shipped.weights[-1].shape[1] > outputs(n_layers)
+    if training_form or area:
+        net = make_network(n_layers, area)
         warm_start(net, shipped)
         scores = lobe_errors(net, data)
     else:
         scores = validation.lobe_errors(data, validation.predicted_lobes(data, shipped))
     manifest = {**shipped.manifest, "held_out_validation": {k: v for k, v in scores.items() if k != "per_config"},
-                "held_out_per_config": scores["per_config"]}
+                "held_out_per_config": scores["per_config"],
+                "held_out_scored_by": "training form" if training_form or area else "add-on"}
     mlp.save(path, shipped.weights, shipped.biases, manifest)
     mlp.load.cache_clear()
     return manifest
@@ -384,7 +389,14 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="a few seconds of training (tests)")
     ap.add_argument("--rescore", action="store_true",
                     help="only re-score the weights in --out on --validation and record it in their manifests")
+    ap.add_argument("--training-form", action="store_true",
+                    help="with --rescore: score as training does (torch, the prediction from above for every wo), "
+                         "the measure of weights trained with --area, to compare the two")
     a = ap.parse_args(argv)
+    if a.area and not a.rescore and Path(a.out).resolve() == ms.WEIGHTS.resolve():
+        print(f"--area weights are a candidate form the add-on refuses: write them elsewhere than {ms.WEIGHTS}",
+              file=sys.stderr)
+        return 2
     torch.set_num_threads(a.threads)
     global DEVICE
     DEVICE = torch.device(a.device)
@@ -395,7 +407,7 @@ def main(argv=None) -> int:
                 print(json.dumps({"layers": n_layers, "grouped": True,
                                   **{k: v for k, v in scores.items() if k != "per_config"}}))
                 continue
-            scores = record_held_out(Path(a.out) / ms.weights_path(n_layers).name, a.validation)
+            scores = record_held_out(Path(a.out) / ms.weights_path(n_layers).name, a.validation, a.training_form)
             print(json.dumps({"layers": n_layers, **scores["held_out_validation"]}))
         return 0
     if max(a.layers) > ms.NETWORK_LAYERS:

@@ -185,7 +185,7 @@ def decode(raw, rows, ops=NumpyOps):
     n_layers = rows.shape[1]
     known = (n_layers * OUTPUTS + WEIGHT_OUTPUTS, n_layers * OUTPUTS + WEIGHT_OUTPUTS + FORWARD_OUTPUTS)
     if raw.shape[1] not in known:
-        raise ValueError(f"a {n_layers}-layer network has {known[0]} or {known[1]} outputs, this one {raw.shape[1]} "
+        raise ValueError(f"raw outputs for {n_layers} layers are {known[0]} or {known[1]} wide, these {raw.shape[1]} "
                          f"(weights trained with training.train --area, a form the add-on does not evaluate?)")
     layers = []
     weights = ops.softplus(raw[:, n_layers * OUTPUTS:n_layers * OUTPUTS + WEIGHT_OUTPUTS])

@@ -48,24 +48,29 @@ def predicted_lobes(data: dict, net=None, energy: bool = True) -> np.ndarray:
     return out
 
 
+def scored_lobes(data: dict):
+    """The Monte Carlo lobe f_ms |cos wo| (C, n_wi, n_wo, 3), its sum per configuration, and which configurations
+    are scored: those with at least 1e-3 of the largest sum."""
+    truth = data["ms"] * np.abs(data["wo"][:, None, :, 2:])
+    total = truth.sum(axis=(1, 2, 3))
+    return truth, total, total > 1e-3 * total.max()
+
+
 def lobe_errors(data: dict, predicted: np.ndarray | None = None) -> dict:
     """Per configuration, the relative L1 error of the predicted lobe (f |cos wo| summed over the stored pairs)
     against Monte Carlo, its relative energy error, and the Monte Carlo noise's own relative L1 for scale.
     Configurations with less than 1e-3 of the largest multiple-scattering energy are left out of the means."""
     pred = predicted_lobes(data) if predicted is None else predicted
-    cos_o = np.abs(data["wo"][:, None, :, 2:])
-    truth = data["ms"] * cos_o
-    total = truth.sum(axis=(1, 2, 3))
+    truth, total, keep = scored_lobes(data)
     safe = np.maximum(total, 1e-12)
     rel = np.abs(pred - truth).sum(axis=(1, 2, 3)) / safe
     energy = (pred.sum(axis=(1, 2, 3)) - total) / safe
-    keep = total > 1e-3 * total.max()
     out = {"configs": int(keep.sum()), "mean_relative_lobe_error": float(rel[keep].mean()),
            "median_relative_lobe_error": float(np.median(rel[keep])),
            "worst_relative_lobe_error": float(rel[keep].max()),
            "mean_relative_energy_error": float(np.abs(energy[keep]).mean())}
     if "ms_half_diff" in data:  # a training pack (training.dataset.pack) leaves it out
-        noise = (np.abs(data["ms_half_diff"]) * cos_o).sum(axis=(1, 2, 3)) / safe
+        noise = (np.abs(data["ms_half_diff"]) * np.abs(data["wo"][:, None, :, 2:])).sum(axis=(1, 2, 3)) / safe
         out["mean_monte_carlo_noise"] = float(noise[keep].mean())
     return {**out, "per_config": np.where(keep, rel, np.nan).tolist()}
 

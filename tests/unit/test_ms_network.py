@@ -133,8 +133,13 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
                        "--threads", "1", "--layers", "1", "--init", str(weights), "--area"]) == 0
     manifest = mlp.load(area / ms.weights_path(1).name).manifest
     assert manifest["area_exponents"] and manifest["outputs"] == train.outputs(1, area=True)
-    assert 0.0 < manifest["held_out_validation"]["mean_relative_lobe_error"] < 10.0
-    assert not mlp.load(weights / ms.weights_path(1).name).manifest["area_exponents"]
+    assert len(manifest["held_out_per_config"]) == len(dataset.load(data_dir, 1)["rows"])
+    assert manifest["held_out_scored_by"] == "training form"
+    plain = mlp.load(weights / ms.weights_path(1).name).manifest
+    assert not plain["area_exponents"] and plain["held_out_scored_by"] == "add-on"
+    assert train.main(["--rescore", "--training-form", "--layers", "1", "--out", str(weights), "--validation",
+                       str(data_dir)]) == 0  # the same measure for both, to compare them
+    assert mlp.load(weights / ms.weights_path(1).name).manifest["held_out_scored_by"] == "training form"
     mlp.load.cache_clear()
     ms.predict.cache_clear()
 
@@ -321,6 +326,13 @@ def test_a_warm_start_goes_on_from_the_exported_network(n_layers):
     np.testing.assert_allclose(raw[:, :exported.weights[-1].shape[1]], exported(x), rtol=1e-9, atol=1e-12)
     if n_layers == 2:
         assert (ms.decode(raw, rows)[1][:, ms.FORWARD_ALBEDO] < 0.02).all()
+    with_area = train.make_network(n_layers, area=True)  # --area from weights without the exponents
+    train.warm_start(with_area, exported)
+    with torch.no_grad():
+        raw_area = with_area(torch.as_tensor(x)).numpy()
+    np.testing.assert_allclose(raw_area[:, :exported.weights[-1].shape[1]], exported(x), rtol=1e-9, atol=1e-12)
+    exponents = np.log1p(np.exp(raw_area[:, train.outputs(n_layers):]))
+    assert exponents.shape[1] == n_layers and exponents.max() < 1e-2  # areas to about the power 0: the lobe as it was
     with pytest.raises(ValueError, match="neither"):
         train.warm_start(train.make_network(n_layers), train.to_mlp(train.make_network(3 - n_layers), {}))
 
@@ -348,34 +360,42 @@ def test_the_lobe_bound_splits_each_error_by_direction_into_parts_that_add_up_to
     assert all(p["error"] == 0.0 for name, p in parts.items() if name != "forward")
 
 
-def test_the_area_exponents_scale_the_forward_lobe_by_the_layers_projected_areas_to_their_powers():
-    """``train.predicted_lobe`` of a network with the area exponents (``--area``): an exponent near 0 keeps the
-    forward lobe; exponent p on a flake layer scales it by (σ(wi) σ(wo))^p, σ the reference's projected area of that
-    layer; everything else is the network's without them. The add-on refuses such outputs."""
-    data = {k: v[:3] for k, v in validation.load_shards(VALIDATION, 1).items() if k != "meta"}
-    flake = next(c for c, rows in enumerate(data["rows"]) if rows[0, layer_rows.TYPE] < 1.5)
+@pytest.mark.parametrize("n_layers", [1, 2])
+def test_the_area_exponents_scale_the_forward_lobe_by_the_layers_projected_areas_to_their_powers(n_layers):
+    """``train.predicted_lobe`` of a network with the area exponents (``--area``): exponents near 0 keep the
+    forward lobe; exponent p on the last layer (a flake layer) scales it by (σ(wi) σ(wo))^p, σ the reference's
+    projected area of that layer; everything else is the network's without them. The add-on refuses such outputs."""
+    data = {k: v for k, v in validation.load_shards(VALIDATION, n_layers).items() if k != "meta"}
+    flake = next(c for c, rows in enumerate(data["rows"]) if rows[-1, layer_rows.TYPE] < 1.5)
     data = {k: v[flake:flake + 1] for k, v in data.items()}
     rows, wi, wo = train.tensors(data)
-    raw = torch.zeros((1, train.outputs(1, area=True)), dtype=torch.float64)
-    raw[0, train.outputs(1) - ms.FORWARD_OUTPUTS:train.outputs(1)] = torch.tensor((0.7, 0.3, -1.0, 2.0, -0.4))
+    plain = train.outputs(n_layers)
+    raw = torch.zeros((1, train.outputs(n_layers, area=True)), dtype=torch.float64)
+    raw[0, plain - ms.FORWARD_OUTPUTS:plain] = torch.tensor((0.7, 0.3, -1.0, 2.0, -0.4))
+    raw[0, plain:] = -60.0
 
-    def lobe(exponent_raw):
-        raw[0, -1] = exponent_raw
+    def lobe(last_exponent_raw):
+        raw[0, -1] = last_exponent_raw
         return train.predicted_lobe(lambda x: raw, rows, wi, wo)[0].numpy().reshape(-1, 3)
 
-    without = train.predicted_lobe(lambda x: raw[:, :train.outputs(1)], rows, wi, wo)[0].numpy().reshape(-1, 3)
+    without = train.predicted_lobe(lambda x: raw[:, :plain], rows, wi, wo)[0].numpy().reshape(-1, 3)
     np.testing.assert_allclose(lobe(-60.0), without, rtol=1e-12, atol=1e-15)
-    params = layer_rows.params_from_rows(data["rows"][0])
+    last = layer_rows.params_from_rows(data["rows"][0]).layers[-1]
     big_wi = np.repeat(data["wi"][0], len(data["wo"][0]), axis=0).astype(float)
     big_wo = np.tile(data["wo"][0], (len(data["wi"][0]), 1)).astype(float)
-    weights = ms.decode(raw[:, :train.outputs(1)].numpy(), data["rows"].astype(float))[1][0]
+    weights = ms.decode(raw[:, :plain].numpy(), data["rows"].astype(float))[1][0]
     forward = ref.eval(ms.forward_params(weights), big_wi, big_wo) * np.abs(big_wo[:, 2:])
-    areas = (ref._sigma(params.layers[0], big_wi) * ref._sigma(params.layers[0], big_wo))[:, None]
+    areas = (ref._sigma(last, big_wi) * ref._sigma(last, big_wo))[:, None]
     assert areas.max() > 4.0 * areas.min()  # a layer whose area changes with the direction
     np.testing.assert_allclose(lobe(math.log(math.expm1(1.5))) - without, (areas ** 1.5 - 1.0) * forward, rtol=1e-9,
                                atol=1e-12)
     with pytest.raises(ValueError, match="--area"):
         ms.decode(raw.numpy(), data["rows"].astype(float))
+
+
+def test_area_weights_are_not_written_where_the_add_on_loads_its_networks(capsys):
+    assert train.main(["--area", "--out", str(ms.WEIGHTS), "--layers", "1", "--quick"]) == 2
+    assert "refuses" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("form", ["lobe", "halves", "forward", "area"])
@@ -406,8 +426,11 @@ def test_the_lobe_bound_fits_each_held_out_configuration_closer_than_the_network
         np.testing.assert_allclose(weights[ms.FORWARD_ALBEDO], np.log1p(np.exp([0.3, -1.0, 2.0])))
         expected = ref.eval(ms.forward_params(weights), *pairs) * np.abs(pairs[1][:, 2:])
         np.testing.assert_allclose((lobe - lobe0).reshape(-1, 3), expected, rtol=1e-9, atol=1e-12)
-    start, bound = (validation.lobe_errors(data, lobe_bound.best_lobes(halves, steps=steps, rate=0.02,
-                                                                       forward=form in ("forward", "area"),
-                                                                       area=form == "area"))
-                    for steps in (0, 60))
+    fitted = lobe_bound.best_lobes(halves, steps=60, rate=0.02, forward=form == "forward", area=form == "area")
+    start, bound = (validation.lobe_errors(data, lobe_bound.best_lobes(halves, steps=0, rate=0.02,
+                                                                       forward=form in ("forward", "area"))),
+                    validation.lobe_errors(data, fitted))
     assert bound["mean_relative_lobe_error"] < start["mean_relative_lobe_error"] - 0.02
+    if form == "area":  # the exponents take part: the fit is not the forward lobe's alone
+        alone = lobe_bound.best_lobes(halves, steps=60, rate=0.02, forward=True)
+        assert np.abs(fitted - alone).max() > 1e-6 * np.abs(alone).max()
