@@ -34,18 +34,19 @@ def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward
     """f |cos wo| (C, n_wi, n_wo, 3) of the lobe form, with the forward lobe or without, with its outputs optimised
     per configuration (started from the shipped network's; the forward lobe's from ``train.FORWARD_START`` where that
     network has none); ``area`` (and so the forward lobe) adds one exponent per layer (``train.area_scale``), started
-    from ``train.AREA_START``."""
+    from the shipped network's or ``train.AREA_START``."""
     forward = forward or area
     rows, wi, wo = train.tensors(data)
     truth = train.target(data)
     total = truth.sum(dim=(1, 2, 3)).clamp_min(1e-12)
     start = ms.network(rows.shape[1])(ms.features(data["rows"].astype(np.float64)))
-    kept = train.outputs(rows.shape[1]) - ms.FORWARD_OUTPUTS
-    if forward and start.shape[1] == kept:
+    plain, with_forward, with_area = ms.output_widths(rows.shape[1])
+    if start.shape[1] == plain:
         start = np.concatenate([start, np.tile(train.FORWARD_START, (len(start), 1))], axis=1)
-    if area:
+    if start.shape[1] == with_forward:
         start = np.concatenate([start, np.full((len(start), rows.shape[1]), train.AREA_START)], axis=1)
-    raw = torch.tensor(start if forward else start[:, :kept], dtype=torch.float64, requires_grad=True)
+    width = with_area if area else with_forward if forward else plain
+    raw = torch.tensor(start[:, :width], dtype=torch.float64, requires_grad=True)
 
     opt = torch.optim.Adam([raw], lr=rate)
     for step in range(steps):
@@ -115,7 +116,7 @@ def main(argv=None) -> int:
                     help="with the forward lobe (an HG layer's single scattering; without it the paper's form)")
     ap.add_argument("--area", action="store_true",
                     help="the forward lobe (--forward implied) scaled by each layer's projected areas along wi and wo "
-                         "to a power of its own (``train.area_scale``; a candidate form, not the add-on's)")
+                         "to a power of its own (``train.area_scale``; the one-layer network's form since 2026-12-05)")
     ap.add_argument("--breakdown", action="store_true",
                     help="also split each mean lobe error by the directions it lies in (``regions``)")
     a = ap.parse_args(argv)

@@ -78,8 +78,9 @@ AREA_START = -8.0  # the area exponents' raw start (``--area``): softplus(-8) = 
 
 
 def outputs(n_layers: int, area: bool = False) -> int:
-    """Raw outputs of a network for ``n_layers``: the add-on's, plus one area exponent per layer with ``area``."""
-    return n_layers * ms.OUTPUTS + ms.WEIGHT_OUTPUTS + ms.FORWARD_OUTPUTS + (n_layers if area else 0)
+    """Raw outputs of a network for ``n_layers``: with the forward lobe, plus one area exponent per layer with
+    ``area`` (``bake.spongecake.output_widths``)."""
+    return ms.output_widths(n_layers)[2 if area else 1]
 
 
 def silu_mlp(sizes) -> torch.nn.Sequential:
@@ -177,12 +178,11 @@ def predicted_lobe(net, rows: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor) 
     along it, which an hg lobe of one mean cosine does not follow)."""
     x = torch.as_tensor(ms.features(rows.cpu().numpy()), device=rows.device)
     raw = net(x)
-    kept = outputs(rows.shape[1])
-    lobe, weights = ms.decode(raw[:, :kept], rows, TorchOps)
+    lobe, weights = ms.decode(raw, rows, TorchOps)
     big_wi, big_wo = all_pairs(wi, wo)
     forward = forward_lobe(weights, big_wi, big_wo)
-    if raw.shape[1] > kept:
-        forward = forward * area_scale(rows, torch.nn.functional.softplus(raw[:, kept:]), big_wi, big_wo).unsqueeze(-1)
+    if raw.shape[1] > outputs(rows.shape[1]):
+        forward = forward * area_scale(rows, weights[:, ms.AREA], big_wi, big_wo).unsqueeze(-1)
     f = eval_stack([layer_batch(lobe[:, k]) for k in range(rows.shape[1])], big_wi, big_wo) + forward
     same = ((big_wi[..., 2] > 0) == (big_wo[..., 2] > 0)).unsqueeze(-1)
     lambert = torch.where(same, weights[:, None, ms.W2R], weights[:, None, ms.W2T]) / math.pi
@@ -305,23 +305,21 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
 def record_held_out(path: Path, held_out: Path, training_form: bool = False) -> dict:
     """Score the exported weights file on the held-out set exactly as the add-on runs it (numpy, float32
     weights, the viewer-side choice of prediction) and record the result in its manifest; with ``training_form``,
-    and always for weights with the area exponents (which the add-on does not run), as training scores it
-    (``predicted_lobe``: torch, the same float32 weights, the prediction from above for every wo). The manifest's
-    ``held_out_scored_by`` says which."""
+    as training scores it (``predicted_lobe``: torch, the same float32 weights, the prediction from above for every
+    wo). The manifest's ``held_out_scored_by`` says which."""
     mlp.load.cache_clear()
     shipped = mlp.load(path)
     n_layers = shipped.manifest["layers"]
     data = dataset.load(held_out, n_layers)
-    area = shipped.weights[-1].shape[1] > outputs(n_layers)
-    if training_form or area:
-        net = make_network(n_layers, area)
+    if training_form:
+        net = make_network(n_layers, shipped.weights[-1].shape[1] > outputs(n_layers))
         warm_start(net, shipped)
         scores = lobe_errors(net, data)
     else:
         scores = validation.lobe_errors(data, validation.predicted_lobes(data, shipped))
     manifest = {**shipped.manifest, "held_out_validation": {k: v for k, v in scores.items() if k != "per_config"},
                 "held_out_per_config": scores["per_config"],
-                "held_out_scored_by": "training form" if training_form or area else "add-on"}
+                "held_out_scored_by": "training form" if training_form else "add-on"}
     mlp.save(path, shipped.weights, shipped.biases, manifest)
     mlp.load.cache_clear()
     return manifest
@@ -384,19 +382,14 @@ def main(argv=None) -> int:
     ap.add_argument("--init", type=Path, help="folder of exported weights to go on training from (warm start; a "
                     "network without the forward lobe gets its outputs added), recorded in the manifest")
     ap.add_argument("--area", action="store_true",
-                    help="train the candidate form with the forward lobe scaled by the layers' projected areas (one "
-                         "more output per layer; the add-on refuses such weights)")
+                    help="scale the forward lobe by the layers' projected areas to a predicted power (one more "
+                         "output per layer)")
     ap.add_argument("--quick", action="store_true", help="a few seconds of training (tests)")
     ap.add_argument("--rescore", action="store_true",
                     help="only re-score the weights in --out on --validation and record it in their manifests")
     ap.add_argument("--training-form", action="store_true",
-                    help="with --rescore: score as training does (torch, the prediction from above for every wo), "
-                         "the measure of weights trained with --area, to compare the two")
+                    help="with --rescore: score as training does (torch, the prediction from above for every wo)")
     a = ap.parse_args(argv)
-    if a.area and not a.rescore and Path(a.out).resolve() == ms.WEIGHTS.resolve():
-        print(f"--area weights are a candidate form the add-on refuses: write them elsewhere than {ms.WEIGHTS}",
-              file=sys.stderr)
-        return 2
     torch.set_num_threads(a.threads)
     global DEVICE
     DEVICE = torch.device(a.device)

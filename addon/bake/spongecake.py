@@ -9,10 +9,14 @@ where params' has the same layer types, count and Fresnel structure as params, a
 (mean cosine g, RGB albedo carrying its weight, thickness; not in the paper). The forward lobe is there for the
 even orders of low-roughness flakes: two mirror reflections about one flake normal undo each other, so that light
 continues close to its own direction, where the flake-shaped lobe puts nothing (docs/training.md measures what it
-wins). A network without its outputs (``FORWARD_OUTPUTS``) predicts none (albedo 0). The paper's single
-Lambertian weight W2 is split into reflection and transmission weights, because a thick layer sends far more
-multiply scattered light back than through, and each is RGB, because multiple scattering is more saturated
-than single scattering (γ^n) and grey Lambert weights cannot follow it (docs/training.md).
+wins). A network without its outputs (``FORWARD_OUTPUTS``) predicts none (albedo 0). A network trained with
+``training.train --area`` also scales it by the layers' projected areas, Π_k (σ_k(wi) σ_k(wo))^p_k with one
+exponent p_k ≥ 0 per layer (σ of the input stack's layer k, 1 for hg layers; ``reference.spongecake.area_scale``):
+the chance of each of the two reflections grows with the area the flakes show along the light; a network without
+them has p = 0. The paper's single Lambertian weight W2 is split into reflection and transmission weights, because a
+thick layer sends far more multiply scattered light back than through, and each is RGB, because multiple
+scattering is more saturated than single scattering (γ^n) and grey Lambert weights cannot follow it
+(docs/training.md).
 
 The prediction is chosen by the side of the viewer: for wo above, the network's prediction for the stack;
 for wo below, its prediction for the flipped stack (layers reversed, orientations mirrored). Reflection above
@@ -27,7 +31,7 @@ Encoding (per layer, ``FEATURES`` = 14 inputs): type one-hot (3); roughness as l
 2 f0 - 1 (3); orientation with z >= 0 (3; zero for hg). Inputs beyond the training ranges are clamped.
 Decoding (per layer, ``OUTPUTS`` = 11 raw values, then ``WEIGHT_OUTPUTS`` = 7 for W1, W2r RGB, W2t RGB, then
 ``FORWARD_OUTPUTS`` = 5 for the forward lobe: g = ``FORWARD_G_MAX`` tanh(.), albedo softplus(.) RGB, T rho moved
-from 1 like the layers' thickness): each
+from 1 like the layers' thickness, then optionally one area exponent per layer, softplus(.)): each
 lobe parameter is a residual on the layer's own (``decode``): alpha' in [0.01, 1], g' in (-0.95, 0.95),
 albedo' and f0' in (0, 1) (f0' = 1 for layers without Fresnel), T rho' in [0.01, 20],
 orientation' = normalize(orientation + tanh(.)); W = softplus(.). ``decode`` is written against an
@@ -62,17 +66,19 @@ FORWARD_OUTPUTS = 5  # the forward lobe's g, albedo RGB, T rho
 FORWARD_G_MAX = 0.98
 # The decoded weights' columns (``decode``): W2r RGB, W2t RGB, then the forward lobe's g, albedo RGB and T rho.
 W2R, W2T, FORWARD_G, FORWARD_ALBEDO, FORWARD_THICKNESS = slice(0, 3), slice(3, 6), 6, slice(7, 10), 10
+AREA = slice(11, None)  # then the area exponents p_k, one per layer (0 for a network without them)
 ALPHA_RANGE = (0.01, 1.0)
 G_MAX = 0.95
 THICKNESS_IN = (0.01, 10.0)
 THICKNESS_OUT = (0.01, 20.0)
-MS_VERSION = 10  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
+MS_VERSION = 11  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
 # stack's scale over the view's azimuth too (``nodes.spongecake.view_inputs``), 5 the energy budget (``energy_budget``),
 # 6 its view tables made safe along the view cosine too (``budget_rows``), 7 the forward lobe (``decode``), 8 each
 # form's budget on its own prediction (the node group's merged fiber lobes: ``nodes.spongecake._FiberLobes``), 9 one
 # ``MS Energy`` input fed from a view table for every stack (``nodes.spongecake.budget_table``), 10 the energy
 # fraction's network for stacks of 1 or 2 layers without a substrate (``energy_fraction``), with budget tables
-# that follow a texture-driven input (``driven_budget_rows``)
+# that follow a texture-driven input (``driven_budget_rows``), 11 the forward lobe scaled by the layers' projected
+# areas (``AREA``; the Cycles forms' along the normal: ``cycles_weights``)
 NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 
@@ -85,6 +91,11 @@ def network(n_layers: int) -> mlp.MLP:
     if not 1 <= n_layers <= model.MAX_LAYERS:
         raise ValueError(f"stacks have 1 to {model.MAX_LAYERS} layers, got {n_layers}")
     return mlp.load(weights_path(min(n_layers, NETWORK_LAYERS)))
+
+
+def scales_forward_by_area(n_layers: int) -> bool:
+    """Whether the network for stacks of ``n_layers`` predicts the area exponents (``decode``)."""
+    return network(n_layers).weights[-1].shape[1] == output_widths(min(n_layers, NETWORK_LAYERS))[2]
 
 
 def energy_weights_path(n_layers: int) -> Path:
@@ -177,16 +188,17 @@ def _log_range(x, lo, hi, ops, r):
 
 
 def decode(raw, rows, ops=NumpyOps):
-    """Raw network outputs (N, L * OUTPUTS + 7 [+ 5]) and the input rows (N, L, ROW) → (lobe rows (N, L, ROW) with
-    W1 folded into the albedo, weights (N, 11): W2r RGB, W2t RGB and the forward lobe's g, albedo RGB, Tρ (columns
-    ``W2R`` ...; albedo 0 without ``FORWARD_OUTPUTS``)). ``ops`` is the array namespace (numpy or torch). Every lobe
-    parameter is a residual on the layer's own value (a zero output keeps it), moved in an unbounded coordinate: the
-    logit of albedo and f0, of the log-position of α and Tρ in their ranges, atanh of g."""
+    """Raw network outputs (N, L * OUTPUTS + 7 [+ 5 [+ L]]) and the input rows (N, L, ROW) → (lobe rows (N, L, ROW)
+    with W1 folded into the albedo, weights (N, 11 + L): W2r RGB, W2t RGB, the forward lobe's g, albedo RGB, Tρ and
+    the area exponents (columns ``W2R`` ... ``AREA``; albedo 0 without ``FORWARD_OUTPUTS``, exponents 0 without
+    theirs)). ``ops`` is the array namespace (numpy or torch). Every lobe parameter is a residual on the layer's own
+    value (a zero output keeps it), moved in an unbounded coordinate: the logit of albedo and f0, of the
+    log-position of α and Tρ in their ranges, atanh of g."""
     n_layers = rows.shape[1]
-    known = (n_layers * OUTPUTS + WEIGHT_OUTPUTS, n_layers * OUTPUTS + WEIGHT_OUTPUTS + FORWARD_OUTPUTS)
+    known = output_widths(n_layers)
     if raw.shape[1] not in known:
-        raise ValueError(f"raw outputs for {n_layers} layers are {known[0]} or {known[1]} wide, these {raw.shape[1]} "
-                         f"(weights trained with training.train --area, a form the add-on does not evaluate?)")
+        raise ValueError(f"raw outputs for {n_layers} layers are {', '.join(map(str, known))} wide, these "
+                         f"{raw.shape[1]}")
     layers = []
     weights = ops.softplus(raw[:, n_layers * OUTPUTS:n_layers * OUTPUTS + WEIGHT_OUTPUTS])
     for k in range(n_layers):
@@ -204,7 +216,44 @@ def decode(raw, rows, ops=NumpyOps):
         o = row[:, rows_.ORIENTATION] + ops.tanh(r[:, 8:11])
         o = o / ops.sqrt(ops.sum_last(o * o) + 1e-12)
         layers.append(ops.concat([kind, rough, albedo, thickness, f0, o], axis=1))
-    return ops.stack(layers, axis=1), ops.concat([weights[:, 1:7], _forward(raw, n_layers, ops)], axis=1)
+    return ops.stack(layers, axis=1), ops.concat([weights[:, 1:7], _forward(raw, n_layers, ops),
+                                                  _area_exponents(raw, n_layers, ops)], axis=1)
+
+
+def cycles_weights(rows, weights) -> np.ndarray:
+    """Decoded weights (N, 11 + L) of stacks ``rows`` (N, L, ROW) as the Cycles forms take them (N, 11): the
+    forward lobe's albedo times its area scale for both directions along the normal (``normal_area_scale``; the
+    forms' multiple-scattering closure weights are those of the view along the normal), the exponents dropped."""
+    out = np.array(weights[:, :AREA.start], dtype=np.float64)
+    out[:, FORWARD_ALBEDO] *= normal_area_scale(rows, weights[:, AREA])[:, None]
+    return out
+
+
+def normal_area_scale(rows, exponents) -> np.ndarray:
+    """Π_k σ_k(n)^(2 p_k) (N,): ``reference.spongecake.area_scale`` at wi = wo = n for stacks of layer rows (N, L,
+    ROW) and exponents (N, L). Along the normal σ² is α² + (1 − α²) cos² for flakes about a normal at cos to n,
+    1 + (α² − 1) cos² for fibers along a tangent at cos to n (the SGGX matrices of ``reference.sggx``), 1 for hg."""
+    rows = np.asarray(rows, dtype=np.float64)
+    kind, alpha2 = rows[..., rows_.TYPE], rows[..., rows_.ROUGHNESS] ** 2
+    o = rows[..., rows_.ORIENTATION]
+    cos2 = o[..., 2] ** 2 / np.maximum(np.sum(o * o, axis=-1), 1e-300)
+    sigma2 = np.where(kind < 0.5, alpha2 + (1.0 - alpha2) * cos2, np.where(kind < 1.5, 1.0 + (alpha2 - 1.0) * cos2, 1.0))
+    return np.exp(np.sum(np.asarray(exponents) * np.log(np.maximum(sigma2, 1e-300)), axis=-1))
+
+
+def output_widths(n_layers: int) -> tuple:
+    """The raw output widths a network for ``n_layers`` may have: without the forward lobe, with it, and with the
+    area exponents too."""
+    plain = n_layers * OUTPUTS + WEIGHT_OUTPUTS
+    return plain, plain + FORWARD_OUTPUTS, plain + FORWARD_OUTPUTS + n_layers
+
+
+def _area_exponents(raw, n_layers: int, ops):
+    """The area exponents p_k (N, L): softplus of the last L raw outputs; 0 for a network without them."""
+    start = output_widths(n_layers)[1]
+    if raw.shape[1] < start + n_layers:
+        return 0.0 * raw[:, :n_layers]
+    return ops.softplus(raw[:, start:start + n_layers])
 
 
 def _forward(raw, n_layers: int, ops):
@@ -228,7 +277,7 @@ def predict_rows(rows: np.ndarray, net: mlp.MLP | None = None):
     if rows.shape[1] <= NETWORK_LAYERS:
         return decode((net or network(rows.shape[1]))(features(rows)), rows)
     lumped, groups = lumped_rows(rows)
-    return decode(grouped_raw((net or network(rows.shape[1]))(features(lumped)), groups), rows)
+    return decode(grouped_raw((net or network(rows.shape[1]))(features(lumped)), groups, rows), rows)
 
 
 def lumped_rows(rows: np.ndarray):
@@ -245,7 +294,7 @@ def lumped_rows(rows: np.ndarray):
     for g in (0, 1):
         member = groups == g
         t = np.where(member, thickness, 0.0)
-        thickest = np.argmax(np.where(member, thickness, -1.0), axis=1)
+        thickest = _thickest(thickness, member)
         lumped[:, g] = rows[np.arange(n), thickest]
         total = t.sum(axis=1)
         lumped[:, g, rows_.THICKNESS] = total
@@ -255,12 +304,28 @@ def lumped_rows(rows: np.ndarray):
     return lumped, groups
 
 
-def grouped_raw(raw: np.ndarray, groups: np.ndarray) -> np.ndarray:
-    """The two-layer network's raw outputs (N, 2 OUTPUTS + 7 [+ 5]) spread to L layers (N, L OUTPUTS + 7 [+ 5]): each
-    layer takes its group's residuals, the weights and the forward lobe stay."""
-    layer_part = raw[:, :2 * OUTPUTS].reshape(len(raw), 2, OUTPUTS)
+def _thickest(thickness: np.ndarray, member: np.ndarray) -> np.ndarray:
+    """(N,) the index of the thickest layer among the ``member`` ones (N, L): the layer a lumped group stands for."""
+    return np.argmax(np.where(member, thickness, -1.0), axis=1)
+
+
+def grouped_raw(raw: np.ndarray, groups: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The two-layer network's raw outputs (N, 2 OUTPUTS + 7 [+ 5 [+ 2]]) spread to the L layers of ``rows`` (N, L
+    OUTPUTS + 7 [+ 5 [+ L]]): each layer takes its group's residuals, the weights and the forward lobe stay; a
+    group's area exponent goes to the layer whose projected area the lumped layer has (its thickest), the others
+    get none (raw −∞: exponent 0)."""
+    n, n_layers = groups.shape
+    layer_part = raw[:, :2 * OUTPUTS].reshape(n, 2, OUTPUTS)
     per_layer = np.take_along_axis(layer_part, groups[:, :, None], axis=1)
-    return np.concatenate([per_layer.reshape(len(raw), -1), raw[:, 2 * OUTPUTS:]], axis=1)
+    shared = raw[:, 2 * OUTPUTS:output_widths(2)[1]]
+    if raw.shape[1] < output_widths(2)[2]:
+        return np.concatenate([per_layer.reshape(n, -1), shared], axis=1)
+    area = np.full((n, n_layers), -np.inf)
+    thickness = rows[..., rows_.THICKNESS]
+    for g in (0, 1):
+        thickest = _thickest(thickness, groups == g)
+        area[np.arange(n), thickest] = raw[:, output_widths(2)[1] + g]
+    return np.concatenate([per_layer.reshape(n, -1), shared, area], axis=1)
 
 
 @dataclass(frozen=True)
@@ -275,6 +340,9 @@ class Prediction:
     reflection_below: tuple
     transmission_below: tuple
     forward_below: model.Params
+    # the forward lobe's area exponents per layer, top first (``AREA``, ``reference.spongecake.area_scale``)
+    forward_area: tuple = ()
+    forward_area_below: tuple = ()
 
 
 @lru_cache(maxsize=256)
@@ -296,7 +364,9 @@ def _prediction(lobes, weights) -> Prediction:
     above = rows_.params_from_rows(lobes[0])
     below = rows_.params_from_rows(rows_.flipped(lobes[1]))
     return Prediction(above, tuple(weights[0, W2R]), tuple(weights[0, W2T]), forward_params(weights[0]),
-                      below, tuple(weights[1, W2R]), tuple(weights[1, W2T]), forward_params(weights[1]))
+                      below, tuple(weights[1, W2R]), tuple(weights[1, W2T]), forward_params(weights[1]),
+                      tuple(map(float, weights[0, AREA])), tuple(map(float, weights[1, AREA][::-1])))
+
 
 
 # ------------------------------------------------------------------------------------ energy fraction

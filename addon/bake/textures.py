@@ -61,7 +61,7 @@ from ..models import spongecake as model
 from ..nodes import spongecake as mapping
 from . import layer_rows as rows_
 from .exr import atomic_path, write_exr
-from .spongecake import NETWORK_LAYERS, predict_rows, weights_path
+from .spongecake import NETWORK_LAYERS, cycles_weights, predict_rows, weights_path
 
 CHUNK = 65536  # texels per network call: about 0.2 to 0.6 s, the step between progress updates
 FORMAT_VERSION = 1  # part of the cache key: bump when the maps' content or layout changes
@@ -275,7 +275,8 @@ def bake_steps(p: model.Params, inputs: dict, labels=None, warnings=None, chunk:
     weights = np.empty((n, max(c.stop for c in _weight_columns().values())))
     for start in range(0, n, chunk):
         stop = min(start + chunk, n)
-        lobes[start:stop], weights[start:stop] = predict_rows(rows[start:stop])
+        lobes[start:stop], decoded = predict_rows(rows[start:stop])
+        weights[start:stop] = cycles_weights(rows[start:stop], decoded)
         yield stop / n
     return pack_maps(p, layout, lobes, weights, (h, w))
 

@@ -129,6 +129,11 @@ APPROXIMATIONS = {
                              "the single-scattering lobe's tangent)",
                              {**_one(type="fiber", roughness=0.1, thickness=1.0, orientation=[1, 0, 0]),
                               "multiple_scattering": True}),
+    "ms-forward-area": ("the multiple-scattering forward lobe's scale by the flakes' projected areas "
+                        "(Π (σ(ωi) σ(ωo))^p) taken along the normal for both directions, as the other "
+                        "multiple-scattering weights (the energy scale restores the total per view)",
+                        {**_one(type="surface", roughness=0.1, thickness=0.5, orientation=[0.5, 0, 0.866]),
+                         "multiple_scattering": True}),
     "schlick-at-view": ("Schlick F at h = flake normal, not per microfacet (node group reflection; both forms' "
                         "transmission)",
                         _one(type="surface", roughness=0.3, thickness=1e4, f0=[0.2, 0.2, 0.2])),
@@ -180,6 +185,10 @@ def approximations_used(p: model.Params) -> list[str]:
         used |= {"ms-energy", "ms-weights-at-normal", "lambert-hg", "diffusivity-exit", "scattering-share"}
         if any(layer.type == "fiber" for layer in p.layers):
             used.add("ms-merged-fiber-lobe")
+        from ..bake.spongecake import scales_forward_by_area
+
+        if any(layer.is_flake for layer in p.layers) and scales_forward_by_area(len(p.layers)):
+            used.add("ms-forward-area")
     return [name for name in APPROXIMATIONS if name in used]
 
 
@@ -342,13 +351,17 @@ def _ms_values(p: model.Params, form: str, weights: str) -> dict:
 
 def lobe_values(p: model.Params) -> dict:
     """The network's lobes as ``MS`` socket values: every baked input but the energy budget, i.e. what a texture
-    bake gives each texel (addon.bake.textures)."""
-    from ..bake.spongecake import predict
+    bake gives each texel (addon.bake.textures). The forward lobe's albedo carries its area scale (a network with
+    the area exponents) for both directions along the normal, as the other multiple-scattering weights are taken
+    at the normal view (``bake.spongecake.cycles_weights``). [approx: ms-forward-area]"""
+    from ..bake.layer_rows import stack_rows
+    from ..bake.spongecake import normal_area_scale, predict
 
     pred = predict(p)
     forward = pred.forward.layers[0]
+    area = normal_area_scale(stack_rows(p)[None], np.asarray(pred.forward_area)[None])[0]
     weights = {"reflection": pred.reflection, "transmission": pred.transmission, "forward_g": forward.roughness,
-               "forward_albedo": forward.albedo, "forward_thickness": forward.thickness}
+               "forward_albedo": tuple(area * np.asarray(forward.albedo)), "forward_thickness": forward.thickness}
     values = {}
     for s in _ms_sockets(p):
         if s.param is MS_ENERGY:

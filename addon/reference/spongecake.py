@@ -76,6 +76,18 @@ def _sigma(layer: Layer, w):
     return sggx.sigma(_sggx(layer), w) if layer.is_flake else np.ones(len(w))
 
 
+def area_scale(params: Params, exponents, wi, wo):
+    """Π_k (σ_k(wi) σ_k(wo))^p_k (N,): the projected areas of the stack's layers (1 for hg layers) along both
+    directions to the ``exponents`` (one per layer, top first), the forward lobe's scale (``bake.spongecake``).
+    Reciprocal; exponents 0 (or none) give 1. σ is even in the direction, so the stack's own layers serve the
+    prediction for either side."""
+    log_scale = np.zeros(len(wi))
+    for layer, p in zip(params.layers, exponents):
+        if p > 0.0 and layer.is_flake:
+            log_scale += p * np.log(np.maximum(_sigma(layer, wi) * _sigma(layer, wo), 1e-300))
+    return np.exp(log_scale)
+
+
 def _optical_depths(params: Params, w):
     """(L, N) optical depths T rho sigma(w) / |cos w| of each layer along w: inf at grazing, 0 for T rho = 0."""
     c = np.abs(w[:, 2])
@@ -235,8 +247,9 @@ def _network_lobes(params: Params, pred, wi, wo):
     """The network's multiple-scattering lobes as predicted, before the energy scale (``eval_multiple``)."""
     up = (wo[:, 2] > 0)[:, None]  # the viewer's side picks the prediction (module docstring)
     same = (wi[:, 2] > 0) == (wo[:, 2] > 0)
-    f = np.where(up, eval(pred.lobe, wi, wo) + eval(pred.forward, wi, wo),
-                 eval(pred.lobe_below, wi, wo) + eval(pred.forward_below, wi, wo))
+    f = np.where(up, eval(pred.lobe, wi, wo) + _forward_lobe(params, pred.forward, pred.forward_area, wi, wo),
+                 eval(pred.lobe_below, wi, wo) + _forward_lobe(params, pred.forward_below, pred.forward_area_below,
+                                                               wi, wo))
     w2r = np.where(up, pred.reflection, pred.reflection_below)
     w2t = np.where(up, pred.transmission, pred.transmission_below)
     f = f + np.where(same[:, None], w2r, w2t) / np.pi
@@ -244,6 +257,11 @@ def _network_lobes(params: Params, pred, wi, wo):
         f = f * ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
     grazing = (wi[:, 2] == 0) | (wo[:, 2] == 0)
     return np.where(grazing[:, None], 0.0, f)
+
+
+def _forward_lobe(params: Params, forward: Params, exponents, wi, wo):
+    """The network's forward lobe (one hg layer) scaled by the stack's projected areas (``area_scale``)."""
+    return eval(forward, wi, wo) * area_scale(params, exponents, wi, wo)[:, None]
 
 
 ENERGY_SAMPLES = 4096  # directions per view of the albedos behind the energy tables (``directional_albedo``)
@@ -326,9 +344,12 @@ def network_albedo(params: Params, pred, wo):
     (all on one side): the extra single-scattering lobe's and the forward lobe's plus W2r + W2t (Lambert, exact);
     over a substrate reflection only."""
     up = wo[0, 2] > 0
+    lobe, forward, exponents = ((pred.lobe, pred.forward, pred.forward_area) if up
+                                else (pred.lobe_below, pred.forward_below, pred.forward_area_below))
     reflection, transmission = (
-        sum(parts) for parts in zip(*(directional_albedo(lobe, wo, n=ENERGY_SAMPLES, split=True) for lobe in
-                                      ((pred.lobe, pred.forward) if up else (pred.lobe_below, pred.forward_below)))))
+        a + b for a, b in zip(directional_albedo(lobe, wo, n=ENERGY_SAMPLES, split=True),
+                              directional_albedo(forward, wo, n=ENERGY_SAMPLES, split=True,
+                                                 weight_of=lambda x, w: area_scale(params, exponents, x, w))))
     w2r = np.asarray(pred.reflection if up else pred.reflection_below)
     w2t = np.asarray(pred.transmission if up else pred.transmission_below)
     if params.substrate is not None:
@@ -389,7 +410,8 @@ def _multiple_weights(params: Params, wi):
     scale = np.where(up, energy_at(above, wi).mean(axis=1), energy_at(below, wi).mean(axis=1))
     transmits = params.substrate is None
     columns = [np.where(up, _intercepted(pred.lobe, wi), _intercepted(pred.lobe_below, wi)),
-               np.where(up, _intercepted(pred.forward, wi), _intercepted(pred.forward_below, wi)),
+               np.where(up, _intercepted(pred.forward, wi) * area_scale(params, pred.forward_area, wi, wi),
+                        _intercepted(pred.forward_below, wi) * area_scale(params, pred.forward_area_below, wi, wi)),
                np.where(up, np.mean(pred.reflection), np.mean(pred.reflection_below)),
                np.where(up, np.mean(pred.transmission), np.mean(pred.transmission_below)) * transmits]
     return np.stack(columns, axis=1) * scale[:, None]
@@ -497,8 +519,9 @@ def _stratified(n, rng):
     return np.minimum(np.stack([u0, u1, u2], axis=1), np.nextafter(1.0, 0.0))
 
 
-def directional_albedo(params: Params, wo, n: int = 16384, seed: int = 0, split: bool = False):
-    """Continuous-part albedo int f(wi, wo) |cos wi| dwi (N, 3); with ``split``, (reflection, transmission).
+def directional_albedo(params: Params, wo, n: int = 16384, seed: int = 0, split: bool = False, weight_of=None):
+    """Continuous-part albedo int f(wi, wo) |cos wi| dwi (N, 3); with ``split``, (reflection, transmission); with
+    ``weight_of`` (a function of (wi, wo) arrays, (N,)), the albedo of f times it (sampled as f is).
 
     Deterministic (seeded) stratified estimate with two techniques combined by the balance heuristic: the
     sampler from wo (f is reciprocal up to the dielectric's eta^2) for 7/8 of the samples, uniform directions
@@ -512,14 +535,14 @@ def directional_albedo(params: Params, wo, n: int = 16384, seed: int = 0, split:
     per_chunk = max(1, ALBEDO_CHUNK // max(n, 1))
     for start in range(0, len(wo), per_chunk):
         rows = slice(start, start + per_chunk)
-        reflection[rows], transmission[rows] = _albedo_rows(params, wo[rows], draws[rows])
+        reflection[rows], transmission[rows] = _albedo_rows(params, wo[rows], draws[rows], weight_of)
     return (reflection, transmission) if split else reflection + transmission
 
 
 ALBEDO_CHUNK = 1 << 18  # samples per array in ``directional_albedo``
 
 
-def _albedo_rows(params: Params, wo, draws):
+def _albedo_rows(params: Params, wo, draws, weight_of=None):
     """``directional_albedo``'s (reflection, transmission) of the views ``wo`` (K, 3) from their draws."""
     k = len(wo)
     n_b, n_u = len(draws[0][0]), len(draws[0][1])
@@ -531,6 +554,8 @@ def _albedo_rows(params: Params, wo, draws):
     ws = wo[row]
     q = n_b * pdf(params, ws, x) + n_u / (4.0 * np.pi)
     value = eval(params, x, ws) * np.abs(x[:, 2:]) / q[:, None]
+    if weight_of is not None:
+        value = value * weight_of(x, ws)[:, None]
     same = x[:, 2] * ws[:, 2] > 0
 
     def per_row(mask):

@@ -21,11 +21,12 @@ def _rows(n_layers, n=64, seed=3):
     return dataset.sample_layers(np.random.default_rng(seed), n, n_layers)
 
 
-def _random_network(n_layers, seed=0):
+def _random_network(n_layers, seed=0, area=False):
     torch.manual_seed(seed)
-    net = train.make_network(n_layers)
+    net = train.make_network(n_layers, area)
     with torch.no_grad():
         net[-1].weight.mul_(20.0)  # far from the near-constant initial output, so the test can fail
+        net[-1].bias[train.outputs(n_layers):] = 0.5  # area exponents about 1
     return net
 
 
@@ -46,12 +47,12 @@ def test_numpy_inference_matches_torch_through_the_shipped_float32_format(n_laye
     assert np.ptp(lobe_n[:, :, layer_rows.ROUGHNESS]) > 0.1  # the outputs really vary
 
 
-@pytest.mark.parametrize("n_layers", [1, 2])
-def test_numpy_lobe_matches_the_differentiable_training_lobe(n_layers, monkeypatch, tmp_path):
-    """The loss's W1 f_ss(params') + W2 / pi (torch) and the add-on's eval_multiple (numpy) before its energy scale
-    are one function for the viewer above, light from either side (below the viewer sees the flipped stack's
-    prediction)."""
-    net = _random_network(n_layers, seed=1)
+@pytest.mark.parametrize("n_layers,area", [(1, False), (2, False), (1, True), (2, True)])
+def test_numpy_lobe_matches_the_differentiable_training_lobe(n_layers, area, monkeypatch, tmp_path):
+    """The loss's W1 f_ss(params') + W2 / pi + the forward lobe (torch) and the add-on's eval_multiple (numpy)
+    before its energy scale are one function for the viewer above, light from either side (below the viewer sees
+    the flipped stack's prediction); with the area exponents (``--area``) too."""
+    net = _random_network(n_layers, seed=1, area=area)
     exported = train.to_mlp(net, {})
     mlp.save(tmp_path / ms.weights_path(n_layers).name, exported.weights, exported.biases, {})
     monkeypatch.setattr(ms, "WEIGHTS", tmp_path)
@@ -60,8 +61,10 @@ def test_numpy_lobe_matches_the_differentiable_training_lobe(n_layers, monkeypat
     rng = np.random.default_rng(5)
     data = {"rows": _rows(n_layers, 6), "wi": np.stack([dataset.stratified_sphere(rng, 18) for _ in range(6)]),
             "wo": np.stack([dataset.stratified_hemisphere(rng, 16) for _ in range(6)])}  # viewer above (see eval_multiple)
-    net32 = train.make_network(n_layers)
+    net32 = train.make_network(n_layers, area)
     net32.load_state_dict({k: v.float().double() for k, v in net.state_dict().items()})
+    if area:
+        assert 0.1 < ms.predict(layer_rows.params_from_rows(data["rows"][0])).forward_area[0] < 10.0
     with torch.no_grad():
         torch_lobe = train.predicted_lobe(net32, *train.tensors(data)).numpy()
     data["ms"] = np.zeros(torch_lobe.shape)
@@ -128,13 +131,13 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
                       + 1e-4 * scale)
     assert train.main(["--quick", "--data", str(packed), "--out", str(tmp_path / "from-pack"), "--validation",
                        str(data_dir), "--threads", "1", "--layers", "1"]) == 0
-    area = tmp_path / "area"  # the candidate form: one more output, scored by the training form
+    area = tmp_path / "area"  # one more output per layer, scored as the add-on runs it
     assert train.main(["--quick", "--data", str(data_dir), "--out", str(area), "--validation", str(data_dir),
                        "--threads", "1", "--layers", "1", "--init", str(weights), "--area"]) == 0
     manifest = mlp.load(area / ms.weights_path(1).name).manifest
     assert manifest["area_exponents"] and manifest["outputs"] == train.outputs(1, area=True)
     assert len(manifest["held_out_per_config"]) == len(dataset.load(data_dir, 1)["rows"])
-    assert manifest["held_out_scored_by"] == "training form"
+    assert manifest["held_out_scored_by"] == "add-on"
     plain = mlp.load(weights / ms.weights_path(1).name).manifest
     assert not plain["area_exponents"] and plain["held_out_scored_by"] == "add-on"
     assert train.main(["--rescore", "--training-form", "--layers", "1", "--out", str(weights), "--validation",
@@ -242,9 +245,23 @@ def test_a_layer_split_in_two_halves_gets_the_two_layer_networks_lambert_weights
     two[:, 0, layer_rows.THICKNESS] = two[:, 1, layer_rows.THICKNESS]  # the split falls between them
     three = np.concatenate([two[:, :1], two[:, 1:], two[:, 1:]], axis=1)
     three[:, 1:, layer_rows.THICKNESS] *= 0.5
-    np.testing.assert_allclose(ms.predict_rows(three)[1], ms.predict_rows(two)[1], rtol=1e-12)
+    weights = slice(None, ms.AREA.start)  # the area exponents: one per layer (``test_grouped_area_exponents``)
+    np.testing.assert_allclose(ms.predict_rows(three)[1][:, weights], ms.predict_rows(two)[1][:, weights], rtol=1e-12)
     lumped, _ = ms.lumped_rows(three)
     np.testing.assert_allclose(lumped, two, rtol=1e-12)
+
+
+def test_grouped_area_exponents_go_to_the_layer_each_lumped_layer_stands_for():
+    """A group's area exponent scales by the projected area of its thickest layer, whose orientation and roughness
+    the lumped layer has; the other layers of the group get exponent 0."""
+    rows = _rows(4, n=8, seed=4)
+    rows[:, :, layer_rows.THICKNESS] = [0.5, 2.0, 1.0, 1.5]  # groups {0, 1} and {2, 3}: thickest 1 and 3
+    lumped, groups = ms.lumped_rows(rows)
+    raw = np.zeros((8, ms.output_widths(2)[2]))
+    raw[:, -2:] = [0.3, -0.7]
+    exponents = ms.decode(ms.grouped_raw(raw, groups, rows), rows)[1][:, ms.AREA]
+    expected = np.log1p(np.exp([0.0, 0.3, 0.0, -0.7])) * [0, 1, 0, 1]
+    np.testing.assert_allclose(exponents, np.broadcast_to(expected, exponents.shape), rtol=1e-12)
 
 
 @pytest.mark.parametrize("n_layers", [3, 4])
@@ -364,7 +381,8 @@ def test_the_lobe_bound_splits_each_error_by_direction_into_parts_that_add_up_to
 def test_the_area_exponents_scale_the_forward_lobe_by_the_layers_projected_areas_to_their_powers(n_layers):
     """``train.predicted_lobe`` of a network with the area exponents (``--area``): exponents near 0 keep the
     forward lobe; exponent p on the last layer (a flake layer) scales it by (σ(wi) σ(wo))^p, σ the reference's
-    projected area of that layer; everything else is the network's without them. The add-on refuses such outputs."""
+    projected area of that layer; everything else is the network's without them. The add-on decodes the exponents
+    as training does."""
     data = {k: v for k, v in validation.load_shards(VALIDATION, n_layers).items() if k != "meta"}
     flake = next(c for c, rows in enumerate(data["rows"]) if rows[-1, layer_rows.TYPE] < 1.5)
     data = {k: v[flake:flake + 1] for k, v in data.items()}
@@ -389,13 +407,12 @@ def test_the_area_exponents_scale_the_forward_lobe_by_the_layers_projected_areas
     assert areas.max() > 4.0 * areas.min()  # a layer whose area changes with the direction
     np.testing.assert_allclose(lobe(math.log(math.expm1(1.5))) - without, (areas ** 1.5 - 1.0) * forward, rtol=1e-9,
                                atol=1e-12)
-    with pytest.raises(ValueError, match="--area"):
-        ms.decode(raw.numpy(), data["rows"].astype(float))
-
-
-def test_area_weights_are_not_written_where_the_add_on_loads_its_networks(capsys):
-    assert train.main(["--area", "--out", str(ms.WEIGHTS), "--layers", "1", "--quick"]) == 2
-    assert "refuses" in capsys.readouterr().err
+    exponents = ms.decode(raw.numpy(), data["rows"].astype(float))[1][0, ms.AREA]
+    np.testing.assert_allclose(exponents[-1], 1.5, rtol=1e-12)
+    params = layer_rows.params_from_rows(data["rows"][0].astype(float))
+    np.testing.assert_allclose(ref.area_scale(params, exponents, big_wi, big_wo)[:, None], areas ** 1.5, rtol=1e-9)
+    with pytest.raises(ValueError, match="wide"):
+        ms.decode(np.pad(raw.numpy(), ((0, 0), (0, 1))), data["rows"].astype(float))  # one output too many
 
 
 @pytest.mark.parametrize("form", ["lobe", "halves", "forward", "area"])
@@ -434,3 +451,23 @@ def test_the_lobe_bound_fits_each_held_out_configuration_closer_than_the_network
     if form == "area":  # the exponents take part: the fit is not the forward lobe's alone
         alone = lobe_bound.best_lobes(halves, steps=60, rate=0.02, forward=True)
         assert np.abs(fitted - alone).max() > 1e-6 * np.abs(alone).max()
+
+
+def test_the_cycles_forms_area_scale_along_the_normal_is_the_references():
+    """``normal_area_scale`` (vectorised over layer rows, what texture bakes use) is the reference's ``area_scale``
+    at wi = wo = n, for flakes, fibers and hg layers at any orientation; ``cycles_weights`` applies it to the forward
+    lobe's albedo alone."""
+    rows = _rows(2, n=24, seed=11)
+    exponents = np.random.default_rng(2).uniform(0.0, 2.0, (24, 2))
+    n = np.array([[0.0, 0.0, 1.0]])
+    expected = [ref.area_scale(layer_rows.params_from_rows(r), e, n, n)[0] for r, e in zip(rows, exponents)]
+    scale = ms.normal_area_scale(rows, exponents)
+    np.testing.assert_allclose(scale, expected, rtol=1e-10)
+    assert np.ptp(scale) > 0.5  # the layers' areas along the normal differ
+    weights = np.random.default_rng(3).uniform(0.1, 1.0, (24, ms.AREA.start + 2))
+    weights[:, ms.AREA] = exponents
+    seen = ms.cycles_weights(rows, weights)
+    np.testing.assert_allclose(seen[:, ms.FORWARD_ALBEDO], weights[:, ms.FORWARD_ALBEDO] * scale[:, None], rtol=1e-12)
+    others = np.ones(ms.AREA.start, bool)
+    others[ms.FORWARD_ALBEDO] = False
+    np.testing.assert_array_equal(seen[:, others], weights[:, :ms.AREA.start][:, others])
