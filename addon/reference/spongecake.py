@@ -15,7 +15,8 @@ Conventions (local frame, z = macro normal; ``wi`` points to the light, ``wo`` t
   (transmitted throughput integrates to 1 - F; f(i, o) / eta_o^2 = f(o, i) / eta_i^2).
 * Delta transmission is a Dirac along -wi with weight prod_k tau_k(wi), only when the flag is on and there is
   no substrate (every substrate blocks or refracts it); it is not part of ``eval`` or ``pdf``.
-* With ``multiple_scattering``, ``eval`` adds the network's lobes (Sec. 5, and a forward lobe of ours), and
+* With ``multiple_scattering``, ``eval`` adds the network's lobes (Sec. 5, and a forward lobe of ours, scaled by
+  the layers' projected areas where the network predicts exponents for them: ``area_scale``), and
   ``sample``/``pdf`` sample them too (not in the paper, whose Sec. 4.5 samples single scattering only): the lobes of
   the prediction of wi's side by their own samplers, W2r and W2t cosine-weighted on wi's side and the other.
 * Energy (``energy_tables``; not in the paper): the network's lobes are scaled per view by
