@@ -237,7 +237,8 @@ def normal_area_scale(rows, exponents) -> np.ndarray:
     kind, alpha2 = rows[..., rows_.TYPE], rows[..., rows_.ROUGHNESS] ** 2
     o = rows[..., rows_.ORIENTATION]
     cos2 = o[..., 2] ** 2 / np.maximum(np.sum(o * o, axis=-1), 1e-300)
-    sigma2 = np.where(kind < 0.5, alpha2 + (1.0 - alpha2) * cos2, np.where(kind < 1.5, 1.0 + (alpha2 - 1.0) * cos2, 1.0))
+    flakes, fibers = alpha2 + (1.0 - alpha2) * cos2, 1.0 + (alpha2 - 1.0) * cos2
+    sigma2 = np.where(kind < 0.5, flakes, np.where(kind < 1.5, fibers, 1.0))
     return np.exp(np.sum(np.asarray(exponents) * np.log(np.maximum(sigma2, 1e-300)), axis=-1))
 
 
@@ -341,8 +342,8 @@ class Prediction:
     transmission_below: tuple
     forward_below: model.Params
     # the forward lobe's area exponents per layer, top first (``AREA``, ``reference.spongecake.area_scale``)
-    forward_area: tuple = ()
-    forward_area_below: tuple = ()
+    forward_area: tuple
+    forward_area_below: tuple
 
 
 @lru_cache(maxsize=256)
@@ -366,7 +367,6 @@ def _prediction(lobes, weights) -> Prediction:
     return Prediction(above, tuple(weights[0, W2R]), tuple(weights[0, W2T]), forward_params(weights[0]),
                       below, tuple(weights[1, W2R]), tuple(weights[1, W2T]), forward_params(weights[1]),
                       tuple(map(float, weights[0, AREA])), tuple(map(float, weights[1, AREA][::-1])))
-
 
 
 # ------------------------------------------------------------------------------------ energy fraction
