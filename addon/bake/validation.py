@@ -12,7 +12,8 @@ import numpy as np
 
 from . import layer_rows
 from ..reference.frames import spherical
-from ..reference.spongecake import eval_multiple, leftover, lobes_albedo, single_leftover
+from ..reference.spongecake import (energy_at, energy_tables, eval_multiple, ground_truth_albedo, leftover,
+                                    lobes_albedo, single_leftover)
 from .spongecake import energy_grid, fraction_rows, network, predict_with
 
 ARRAYS = ("rows", "wi", "wo", "ms", "ms_half_diff", "ss")
@@ -73,6 +74,33 @@ def lobe_errors(data: dict, predicted: np.ndarray | None = None) -> dict:
         noise = (np.abs(data["ms_half_diff"]) * np.abs(data["wo"][:, None, :, 2:])).sum(axis=(1, 2, 3)) / safe
         out["mean_monte_carlo_noise"] = float(noise[keep].mean())
     return {**out, "per_config": np.where(keep, rel, np.nan).tolist()}
+
+
+ALBEDO_PATHS = 20000  # random-walk paths per view of ``returned_light``
+
+
+def returned_light(data: dict, paths: int = ALBEDO_PATHS) -> list[dict]:
+    """The light multiple scattering returns at each scored configuration's stored views wi above the stack (its
+    multiple-scattering albedo, (n, 3)): an independent random walk's (orders >= 2, ``ground_truth_albedo``, seeded
+    by the configuration's index) beside the model's, the network's lobes' albedo (``lobes_albedo``) times the
+    energy scale there (``scaled``) and without it (``lobes``). The lobe set's energy error sums f |cos wo| over
+    the stored pairs and so follows the lobes' shape; this is the energy itself."""
+    out = []
+    for c in np.flatnonzero(scored_lobes(data)[2]):
+        params = layer_rows.params_from_rows(data["rows"][c])
+        wi = data["wi"][c].astype(float)
+        wi = wi[wi[:, 2] > 0]
+        lobes = lobes_albedo(params, wi)
+        out.append({"config": int(c), "walk": ground_truth_albedo(params, wi, n_paths=paths, seed=int(c))[2],
+                    "lobes": lobes, "scaled": lobes * energy_at(energy_tables(params)[0], wi)})
+    return out
+
+
+def returned_light_errors(light: list[dict], energy: bool = True) -> np.ndarray:
+    """Per configuration of ``returned_light``, the relative L1 error of the model's albedo (with the energy scale,
+    or without it) against the walk's, over the views and channels."""
+    key = "scaled" if energy else "lobes"
+    return np.array([np.abs(r[key] - r["walk"]).sum() / max(float(r["walk"].sum()), 1e-12) for r in light])
 
 
 # ------------------------------------------------------------------------------ the energy fraction network

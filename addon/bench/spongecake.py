@@ -166,6 +166,7 @@ class MsSizes:
     validation: str = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
                                    "tests", "data", "spongecake_ms_validation")
     energy_validation: str = os.path.join(os.path.dirname(validation), "spongecake_ms_energy_validation.npz")
+    returned_light_paths: int = 20000  # random-walk paths per view of the held-out set's returned light
     failure_paths: int = 4000  # random-walk paths per wi for the low-roughness fiber configurations
     failure_wi: int = 4  # a square number: incident directions per configuration
     failure_wo: int = 64  # twice a square number: outgoing directions over the sphere
@@ -222,9 +223,10 @@ def weights_note() -> str:
     return "; ".join(parts) + "."
 
 
-def validation_errors(folder: str) -> dict:
+def validation_errors(folder: str, light_paths: int) -> dict:
     """{(layers, energy scale on): lobe_errors} of the shipped networks on the held-out Monte Carlo set (absent: not
-    there), with and without the energy scale (``reference.spongecake.energy_tables``)."""
+    there), with and without the energy scale (``reference.spongecake.energy_tables``), each with the mean error of
+    the light returned at the stored views (``validation.returned_light``, ``light_paths`` per view)."""
     from ..bake import validation
 
     out = {}
@@ -233,10 +235,11 @@ def validation_errors(folder: str) -> dict:
             data = validation.load_shards(folder, n)
         except FileNotFoundError:
             continue
-        meta = data["meta"][0]
+        meta, light = data["meta"][0], validation.returned_light(data, light_paths)
         for energy in (True, False):
             scores = validation.lobe_errors(data, validation.predicted_lobes(data, energy=energy))
-            scores.update(paths=meta.get("paths"), n_wi=meta.get("n_wi"), n_wo=meta.get("n_wo"))
+            scores.update(paths=meta.get("paths"), n_wi=meta.get("n_wi"), n_wo=meta.get("n_wo"),
+                          returned_light_error=float(validation.returned_light_errors(light, energy).mean()))
             out[n, energy] = scores
     return out
 
@@ -594,24 +597,28 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
              "The network's lobes (Sec. 5) against the reference's independent random walk (orders ≥ 2). "
              + weights_note(), ""]
     # --- held-out validation set
-    val = validation_errors(sizes.validation)
+    val = validation_errors(sizes.validation, sizes.returned_light_paths)
     lines += ["### Network vs Monte Carlo, held-out validation set", "",
               "`addon.bake.validation.lobe_errors` on `tests/data/spongecake_ms_validation` (independent seed, "
               "never trained on): relative L1 error of f_ms |cos θo| summed over each configuration's direction "
-              "pairs, its relative energy error, and the Monte Carlo noise of the data (relative L1 of the standard "
-              "error) for scale. Stacks of 3 and 4 layers go through the two-layer network, grouped "
-              "(docs/training.md); their energy scale keeps the lobes' own energy (no energy fraction).",
+              "pairs, its relative energy error (of that sum, which follows the lobes' shape as much as their "
+              "energy), and the Monte Carlo noise of the data (relative L1 of the standard error) for scale. "
+              "Light returned: the relative L1 error of the multiple-scattering albedo at each configuration's "
+              "stored views against an independent random walk's "
+              f"({sizes.returned_light_paths} paths per view; `validation.returned_light`), the energy itself. "
+              "Stacks of 3 and 4 layers go through the two-layer network, grouped (docs/training.md); their energy "
+              "scale keeps the lobes' own energy (no energy fraction).",
               ""]
     if val:
         lines += ["| layers | energy scale | configs | pairs × paths | mean | median | worst | mean energy error | "
-                  "Monte Carlo noise |", "|---|---|---|---|---|---|---|---|---|"]
+                  "light returned | Monte Carlo noise |", "|---|---|---|---|---|---|---|---|---|---|"]
         for (n, energy), v in val.items():
             layers = f"{n} (grouped)" if n > NETWORK_LAYERS else n
             lines.append(f"| {layers} | {'yes' if energy else 'no (the network alone)'} | {v['configs']} | "
                          f"{v['n_wi']}×{v['n_wo']} × {v['paths']} | "
                          f"{pct(v['mean_relative_lobe_error'])} | {pct(v['median_relative_lobe_error'])} | "
                          f"{pct(v['worst_relative_lobe_error'])} | {pct(v['mean_relative_energy_error'])} | "
-                         f"{pct(v['mean_monte_carlo_noise'])} |")
+                         f"{pct(v['returned_light_error'])} | {pct(v['mean_monte_carlo_noise'])} |")
     else:
         lines.append("Not measured: the validation set is missing (`make validation-set`).")
     lines += ["", "### Energy fraction network, held-out energy set", "",

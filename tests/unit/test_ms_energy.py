@@ -392,13 +392,13 @@ def test_which_texture_driven_materials_get_a_budget_that_follows_their_texels(m
 
 
 def test_the_scale_brings_a_held_out_stacks_returned_light_to_the_walks():
-    """A held-out absorbing stack (``training.held_out_albedo``; configuration 1 of one layer: the lobes alone return
-    10% too little light at its stored views): with the energy fraction's scale the multiple-scattering albedo is
-    within a few percent of an independent random walk's, several times closer than the lobes' own."""
-    from addon.bake import layer_rows, validation
-    from training.held_out_albedo import albedo_errors
+    """A held-out absorbing stack (configuration 1 of one layer: the lobes alone return 10% too little light at its
+    stored views): with the energy fraction's scale the multiple-scattering albedo is within a few percent of an
+    independent random walk's, several times closer than the lobes' own (``validation.returned_light``)."""
+    from addon.bake import validation
 
     data = validation.load_shards("tests/data/spongecake_ms_validation", 1)
-    wi = data["wi"][1].astype(float)
-    errors = albedo_errors(layer_rows.params_from_rows(data["rows"][1]), wi[wi[:, 2] > 0], paths=4000, seed=1)
-    assert errors["with_scale"] < 0.04 and errors["with_scale"] < 0.3 * errors["without_scale"]
+    one = {k: data[k][1:2] for k in ("rows", "wi", "wo", "ms")}
+    light = validation.returned_light(one, paths=4000)
+    with_scale, without = (validation.returned_light_errors(light, energy=e)[0] for e in (True, False))
+    assert with_scale < 0.04 and with_scale < 0.3 * without
