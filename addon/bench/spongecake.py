@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import presets
+from ..bake.validation import ALBEDO_PATHS
 from ..models import spongecake as model
 from ..nodes import spongecake as mapping
 from ..reference import metrics
@@ -166,7 +167,7 @@ class MsSizes:
     validation: str = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
                                    "tests", "data", "spongecake_ms_validation")
     energy_validation: str = os.path.join(os.path.dirname(validation), "spongecake_ms_energy_validation.npz")
-    returned_light_paths: int = 20000  # random-walk paths per view of the held-out set's returned light
+    returned_light_paths: int = ALBEDO_PATHS  # random-walk paths per view of the held-out set's returned light
     failure_paths: int = 4000  # random-walk paths per wi for the low-roughness fiber configurations
     failure_wi: int = 4  # a square number: incident directions per configuration
     failure_wo: int = 64  # twice a square number: outgoing directions over the sphere
