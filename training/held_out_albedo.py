@@ -8,7 +8,7 @@ scale and without it) beside the lobe set's lobe and pair-sum energy errors with
 configuration whose returned light the scale brings closer while its lobe error grows has lobes of the right total
 in the wrong directions.
 
-    python -m training.held_out_albedo              # one and two layers, about 10 minutes
+    python -m training.held_out_albedo              # one and two layers, about 15 minutes
     python -m training.held_out_albedo --layers 1 --paths 4000
 """
 from __future__ import annotations
@@ -25,7 +25,7 @@ from training import train
 
 def config_rows(data: dict, paths: int) -> list[dict]:
     """One row per scored configuration, each pair (without the scale, with it): the lobe set's lobe error and
-    pair-sum energy error, and the returned light's error."""
+    pair-sum energy error, and the returned light's error; and the walk's own noise in that error's measure."""
     predicted = [validation.predicted_lobes(data, energy=e) for e in (False, True)]
     lobe_errors = [validation.lobe_errors(data, p)["per_config"] for p in predicted]
     _, total, _ = validation.scored_lobes(data)
@@ -35,7 +35,7 @@ def config_rows(data: dict, paths: int) -> list[dict]:
              "lobe_error": [e[r["config"]] for e in lobe_errors],
              "pair_sum_energy_error": [float(p[r["config"]].sum() / total[r["config"]] - 1.0) for p in predicted],
              "albedo_error": [float(e[i]) for e in light_errors],
-             "walk_albedo_mean": float(r["walk"].mean())} for i, r in enumerate(light)]
+             "walk_albedo_mean": float(r["walk"].mean()), "walk_noise": r["walk_noise"]} for i, r in enumerate(light)]
 
 
 def summary(rows: list[dict]) -> dict:
@@ -45,6 +45,7 @@ def summary(rows: list[dict]) -> dict:
     return {"configs": len(rows), "mean_lobe_error": lobe.mean(axis=0).tolist(),
             "mean_abs_pair_sum_energy_error": pair_sum.mean(axis=0).tolist(),
             "mean_albedo_error": albedo.mean(axis=0).tolist(),
+            "mean_walk_noise": float(np.mean([r["walk_noise"] for r in rows])),
             "scale_lowers_albedo_error": int((albedo[:, 1] < albedo[:, 0]).sum()),
             "scale_raises_lobe_error": int((lobe[:, 1] > lobe[:, 0]).sum()),
             "both": int(((albedo[:, 1] < albedo[:, 0]) & (lobe[:, 1] > lobe[:, 0])).sum())}

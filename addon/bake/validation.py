@@ -76,23 +76,31 @@ def lobe_errors(data: dict, predicted: np.ndarray | None = None) -> dict:
     return {**out, "per_config": np.where(keep, rel, np.nan).tolist()}
 
 
-ALBEDO_PATHS = 20000  # random-walk paths per view of ``returned_light``
+ALBEDO_PATHS = 200000  # random-walk paths per view of ``returned_light`` (its noise: ``walk_noise``, about 0.5%)
+NOISE_SEED_OFFSET = 1_000_003  # the second half-walk's seed, past any configuration index
 
 
 def returned_light(data: dict, paths: int = ALBEDO_PATHS) -> list[dict]:
     """The light multiple scattering returns at each scored configuration's stored views wi above the stack (its
-    multiple-scattering albedo, (n, 3)): an independent random walk's (orders >= 2, ``ground_truth_albedo``, seeded
-    by the configuration's index) beside the model's, the network's lobes' albedo (``lobes_albedo``) times the
-    energy scale there (``scaled``) and without it (``lobes``). The lobe set's energy error sums f |cos wo| over
-    the stored pairs and so follows the lobes' shape; this is the energy itself."""
+    multiple-scattering albedo, (n, 3)): an independent random walk's (orders >= 2, ``ground_truth_albedo``, the
+    mean of two half-walks seeded by the configuration's index and that plus ``NOISE_SEED_OFFSET``) beside the
+    model's, the network's lobes' albedo (``lobes_albedo``) times the energy scale there (``scaled``) and without it
+    (``lobes``). ``walk_noise`` is the walk's own relative L1 error, estimated from its halves: for two independent
+    estimates a, b of the same mean, E|(a + b)/2 − mean| = E|a − b| / 2 (normal noise), so Σ|a − b| / Σ(a + b). The
+    lobe set's energy error sums f |cos wo| over the stored pairs and so follows the lobes' shape; this is the
+    energy itself."""
     out = []
     for c in np.flatnonzero(scored_lobes(data)[2]):
         params = layer_rows.params_from_rows(data["rows"][c])
         wi = data["wi"][c].astype(float)
         wi = wi[wi[:, 2] > 0]
+        halves = [ground_truth_albedo(params, wi, n_paths=max(1, paths // 2), seed=int(c) + offset)[2]
+                  for offset in (0, NOISE_SEED_OFFSET)]
         lobes = lobes_albedo(params, wi)
-        out.append({"config": int(c), "walk": ground_truth_albedo(params, wi, n_paths=paths, seed=int(c))[2],
-                    "lobes": lobes, "scaled": lobes * energy_at(energy_tables(params)[0], wi)})
+        out.append({"config": int(c), "walk": 0.5 * (halves[0] + halves[1]), "lobes": lobes,
+                    "scaled": lobes * energy_at(energy_tables(params)[0], wi),
+                    "walk_noise": float(np.abs(halves[0] - halves[1]).sum()
+                                        / max(float((halves[0] + halves[1]).sum()), 1e-12))})
     return out
 
 

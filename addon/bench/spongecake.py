@@ -240,7 +240,8 @@ def validation_errors(folder: str, light_paths: int) -> dict:
         for energy in (True, False):
             scores = validation.lobe_errors(data, validation.predicted_lobes(data, energy=energy))
             scores.update(paths=meta.get("paths"), n_wi=meta.get("n_wi"), n_wo=meta.get("n_wo"),
-                          returned_light_error=float(validation.returned_light_errors(light, energy).mean()))
+                          returned_light_error=float(validation.returned_light_errors(light, energy).mean()),
+                          walk_noise=float(np.mean([r["walk_noise"] for r in light])))
             out[n, energy] = scores
     return out
 
@@ -606,20 +607,22 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "energy), and the Monte Carlo noise of the data (relative L1 of the standard error) for scale. "
               "Light returned: the relative L1 error of the multiple-scattering albedo at each configuration's "
               "stored views against an independent random walk's "
-              f"({sizes.returned_light_paths} paths per view; `validation.returned_light`), the energy itself. "
+              f"({sizes.returned_light_paths} paths per view; `validation.returned_light`), the energy itself, and "
+              "that walk's own noise (the same measure, estimated from its two halves). "
               "Stacks of 3 and 4 layers go through the two-layer network, grouped (docs/training.md); their energy "
               "scale keeps the lobes' own energy (no energy fraction).",
               ""]
     if val:
         lines += ["| layers | energy scale | configs | pairs × paths | mean | median | worst | mean energy error | "
-                  "light returned | Monte Carlo noise |", "|---|---|---|---|---|---|---|---|---|---|"]
+                  "light returned | walk noise | Monte Carlo noise |", "|---|---|---|---|---|---|---|---|---|---|---|"]
         for (n, energy), v in val.items():
             layers = f"{n} (grouped)" if n > NETWORK_LAYERS else n
             lines.append(f"| {layers} | {'yes' if energy else 'no (the network alone)'} | {v['configs']} | "
                          f"{v['n_wi']}×{v['n_wo']} × {v['paths']} | "
                          f"{pct(v['mean_relative_lobe_error'])} | {pct(v['median_relative_lobe_error'])} | "
                          f"{pct(v['worst_relative_lobe_error'])} | {pct(v['mean_relative_energy_error'])} | "
-                         f"{pct(v['returned_light_error'])} | {pct(v['mean_monte_carlo_noise'])} |")
+                         f"{pct(v['returned_light_error'])} | {pct(v['walk_noise'])} | "
+                         f"{pct(v['mean_monte_carlo_noise'])} |")
     else:
         lines.append("Not measured: the validation set is missing (`make validation-set`).")
     lines += ["", "### Energy fraction network, held-out energy set", "",

@@ -402,3 +402,21 @@ def test_the_scale_brings_a_held_out_stacks_returned_light_to_the_walks():
     light = validation.returned_light(one, paths=4000)
     with_scale, without = (validation.returned_light_errors(light, energy=e)[0] for e in (True, False))
     assert with_scale < 0.04 and with_scale < 0.3 * without
+
+
+def test_the_returned_lights_walk_noise_estimate_matches_its_error_against_a_longer_walk():
+    """``returned_light``'s ``walk_noise`` (from its two half-walks) is about the walk's actual relative L1 error
+    against a walk twenty times longer, over three held-out stacks: the bench's noise column means what it says."""
+    from addon.bake import layer_rows, validation
+    from addon.reference.spongecake import ground_truth_albedo
+
+    data = validation.load_shards("tests/data/spongecake_ms_validation", 1)
+    estimated, actual = [], []
+    for c in (1, 4, 9):
+        light = validation.returned_light({k: data[k][c:c + 1] for k in ("rows", "wi", "wo", "ms")}, paths=4000)[0]
+        wi = data["wi"][c].astype(float)
+        longer = ground_truth_albedo(layer_rows.params_from_rows(data["rows"][c]), wi[wi[:, 2] > 0],
+                                     n_paths=80000, seed=777)[2]
+        estimated.append(light["walk_noise"])
+        actual.append(np.abs(light["walk"] - longer).sum() / longer.sum())
+    assert 0.6 < np.mean(estimated) / np.mean(actual) < 1.7
