@@ -4,8 +4,8 @@ For a stack without a substrate and light arriving along ω, multiple scattering
 scattering and the Dirac leave, left(ω) = 1 − A_ss(ω) − T_δ(ω): q = 1 for a white stack without Fresnel flakes,
 less where the layers absorb. One MLP per layer count predicts q per channel (the channels are independent
 random-walk experiments over the same paths) from the layers (``addon.bake.spongecake.energy_inputs``: the lobe
-network's features of the channel's rows and two more, then ω): ``L * ENERGY_FEATURES + 3`` inputs, three hidden
-layers of 128 SiLU units, one output, q = sigmoid(output). The add-on scales the lobe network's lobes to q × left per
+network's features of the channel's rows and two more, then ω, then what ω meets in each layer):
+``energy_input_count(L, True)`` inputs, three hidden layers of 128 SiLU units, one output, q = sigmoid(output). The add-on scales the lobe network's lobes to q × left per
 view (``addon.bake.spongecake.fraction_limit``).
 
 Data: its own, not the lobe dataset's. The lobe dataset's energies are sums over 128 uniform directions, which miss
@@ -155,10 +155,11 @@ def write_validation_set(path: Path, layer_counts=(1, 2), size: Size = VALIDATIO
         np.savez_compressed(f, meta=np.array(json.dumps(meta)), **arrays)
 
 
-def samples_of(data: dict) -> dict:
-    """Flat (stack, wi, channel) training samples: the network's inputs ``x`` and ``validation.energy_samples``."""
+def samples_of(data: dict, view: bool = True) -> dict:
+    """Flat (stack, wi, channel) training samples: the network's inputs ``x`` (with the view features, or without:
+    ``addon.bake.spongecake.energy_inputs``) and ``validation.energy_samples``."""
     n_wi = data["wi"].shape[1]
-    x = ms.energy_inputs(np.repeat(data["rows"], n_wi, axis=0), data["wi"].reshape(-1, 3))
+    x = ms.energy_inputs(np.repeat(data["rows"], n_wi, axis=0), data["wi"].reshape(-1, 3), view)
     return {"x": x.reshape(-1, x.shape[-1]), **validation.energy_samples(data)}
 
 
@@ -175,7 +176,8 @@ def make_network(n_inputs: int, start: float = 0.5) -> torch.nn.Sequential:
 
 def rotated(x: torch.Tensor, n_layers: int, generator: torch.Generator) -> torch.Tensor:
     """Inputs with every orientation and the direction turned by one random angle about the normal and mirrored at
-    random (SpongeCake does not change; the orientation's z, which ``features`` keeps ≥ 0, is left alone)."""
+    random (SpongeCake does not change; the orientation's z, which ``features`` keeps ≥ 0, is left alone; the view
+    features after the direction do not change either)."""
     n = len(x)
     angle = torch.rand(n, generator=generator) * (2.0 * math.pi)
     mirror = torch.where(torch.rand(n, generator=generator) < 0.5, -1.0, 1.0)
@@ -239,7 +241,8 @@ def export(net, info: dict, samples: dict, data: dict, n_layers: int, out: Path,
     meta = data["meta"][0]
     manifest = {
         "model": "spongecake multiple-scattering energy fraction", "layers": n_layers,
-        "inputs": n_layers * ms.ENERGY_FEATURES + 3, "hidden": list(HIDDEN), "activation": "silu", "outputs": 1,
+        "inputs": int(samples["x"].shape[1]),
+        "view_features": samples["x"].shape[1] == ms.energy_input_count(n_layers, True), "hidden": list(HIDDEN), "activation": "silu", "outputs": 1,
         "output": "sigmoid: the share of left = 1 - A_ss - T_delta that multiple scattering returns",
         "training_configs": info["train_configs"], "wi_per_config": meta["n_wi"], "paths_per_wi": meta["paths"],
         "max_depth": meta["max_depth"], "dataset_seed": meta["seed"], "dataset_version": meta["version"],
@@ -275,6 +278,8 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quick", action="store_true", help="a tiny dataset and a few seconds of training (tests)")
+    ap.add_argument("--no-view-features", dest="view", action="store_false",
+                    help="the first input format, without what the view meets in each layer (to compare)")
     a = ap.parse_args(argv)
     torch.set_num_threads(a.threads)
     if a.validation_set:
@@ -291,7 +296,7 @@ def main(argv=None) -> int:
     generate(a.data, a.layers, configs, size, workers=a.workers)
     for n_layers in a.layers:
         data = load(a.data, n_layers)
-        samples = samples_of(data)
+        samples = samples_of(data, a.view)
         minutes = 0.05 if a.quick else a.minutes
         print(f"training the {n_layers}-layer energy network on {len(data['rows'])} stacks for {minutes} min",
               flush=True)

@@ -384,14 +384,23 @@ ENERGY_FEATURES = FEATURES + 3  # per layer: ``features``, √(1 − albedo), �
 LOG_ENERGY_FLOOR = 1e-3  # the least albedo f0 the last of them tells apart
 
 
-def energy_inputs(rows: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """(N, 3, L ENERGY_FEATURES + 3) inputs of the energy network for stacks (N, L ≤ 2, ROW) seen along w (N, 3) from
-    above, per channel: per layer ``features`` of the channel's rows, √(1 − albedo) and √(1 − f0) (multiply
+ENERGY_VIEW_FEATURES = 3  # per layer, after w: what the view meets (``view_features``)
+
+
+def energy_input_count(n_layers: int, view: bool) -> int:
+    """The energy network's inputs for ``n_layers`` layers, with ``view_features`` or without (the first format)."""
+    return n_layers * (ENERGY_FEATURES + ENERGY_VIEW_FEATURES * view) + 3
+
+
+def energy_inputs(rows: np.ndarray, w: np.ndarray, view: bool = True) -> np.ndarray:
+    """(N, 3, ``energy_input_count``) inputs of the energy network for stacks (N, L ≤ 2, ROW) seen along w (N, 3)
+    from above, per channel: per layer ``features`` of the channel's rows, √(1 − albedo) and √(1 − f0) (multiply
     scattered light falls like √(1 − albedo) near white: similarity theory), log(albedo f0) / |log floor| (each
     bounce multiplies by about albedo f0, so the share left after a few is a power of it), then w in the stack's
-    frame."""
+    frame, then (``view``) each layer's ``view_features``."""
     rows, w = np.asarray(rows, dtype=np.float64), np.asarray(w, dtype=np.float64)
     n, n_layers = rows.shape[:2]
+    seen = [view_features(rows, w)] if view else []
 
     def of_channel(c):
         one = channel_rows(rows, c)
@@ -400,18 +409,40 @@ def energy_inputs(rows: np.ndarray, w: np.ndarray) -> np.ndarray:
         per_bounce = np.log(np.maximum(albedo * f0, LOG_ENERGY_FLOOR)) / -math.log(LOG_ENERGY_FLOOR)
         per_layer = np.concatenate([features(one).reshape(n, n_layers, FEATURES), near_white, per_bounce[..., None]],
                                    axis=2)
-        return np.concatenate([per_layer.reshape(n, -1), w], axis=1)
+        return np.concatenate([per_layer.reshape(n, -1), w, *seen], axis=1)
 
     return np.stack([of_channel(c) for c in range(3)], axis=1)
+
+
+def view_features(rows: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """(N, L * ENERGY_VIEW_FEATURES) what the view w (N, 3) meets in each layer of stacks (N, L, ROW): c² for c = w·o
+    (o the unit orientation), the projected area σ(w) of the layer's SGGX distribution (research notes §1: surface
+    flakes √(α² + (1 − α²) c²), fibers √(1 + (α² − 1) c²); 1 for hg layers), and for surface flakes the z of w's
+    mirror image about o, 2 c o_z − w_z (where a smooth flake sends the light: back up, or down into the stack; 0
+    for other layers). What the network would have to learn from products of its inputs, given: the light a tilted
+    smooth layer multiply scatters follows these, not the azimuth alone. Unchanged by turns and mirrors about the
+    normal (``training.energy_train.rotated``)."""
+    kind = np.rint(rows[..., rows_.TYPE]).astype(int)
+    o = rows[..., rows_.ORIENTATION]
+    o = o / np.maximum(np.linalg.norm(o, axis=-1, keepdims=True), 1e-12)
+    c = np.einsum("nlk,nk->nl", o, w)
+    a2 = np.clip(rows[..., rows_.ROUGHNESS], *ALPHA_RANGE) ** 2
+    surface, fiber = kind == 0, kind == 1
+    sigma = np.where(surface, np.sqrt(a2 + (1.0 - a2) * c * c),
+                     np.where(fiber, np.sqrt(np.maximum(1.0 + (a2 - 1.0) * c * c, 0.0)), 1.0))
+    flake = surface | fiber
+    mirror_z = np.where(surface, 2.0 * c * o[..., 2] - w[:, None, 2], 0.0)
+    out = np.stack([np.where(flake, c * c, 0.0), sigma, mirror_z], axis=-1)
+    return out.reshape(len(rows), -1)
 
 
 def fraction_rows(rows: np.ndarray, w: np.ndarray, net: mlp.MLP | None = None) -> np.ndarray:
     """The energy fraction (N, 3) of stacks (N, L ≤ 2, ROW) seen along w (N, 3) from above: the share of what single
     scattering and the Dirac leave that multiple scattering returns (``energy_fraction``); the shipped network for L
-    layers, or ``net``."""
+    layers, or ``net`` (with ``view_features`` where its inputs count them)."""
     rows = np.asarray(rows, dtype=np.float64)
     net = net or energy_network(rows.shape[1])
-    x = energy_inputs(rows, w)
+    x = energy_inputs(rows, w, view=net.weights[0].shape[0] == energy_input_count(rows.shape[1], True))
     raw = net(x.reshape(-1, x.shape[-1])).reshape(len(rows), 3)
     return 1.0 / (1.0 + np.exp(-np.clip(raw, -60.0, 60.0)))
 

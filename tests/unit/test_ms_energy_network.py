@@ -23,17 +23,18 @@ def _upper(n, seed=5):
     return dataset.stratified_hemisphere(np.random.default_rng(seed), n)
 
 
-@pytest.mark.parametrize("n_layers", [1, 2, 3, 4])
-def test_numpy_fraction_matches_torch_through_the_shipped_float32_format(n_layers, tmp_path):
+@pytest.mark.parametrize("n_layers, view", [(1, True), (2, True), (2, False), (3, True), (4, False)])
+def test_numpy_fraction_matches_torch_through_the_shipped_float32_format(n_layers, view, tmp_path):
+    """Either input format, told apart by the network's input count."""
     torch.manual_seed(n_layers)
-    net = energy_train.make_network(n_layers * ms.ENERGY_FEATURES + 3)
+    net = energy_train.make_network(ms.energy_input_count(n_layers, view))
     with torch.no_grad():
         net[-1].weight.mul_(200.0)  # far from a constant output, so the test can fail
     path = tmp_path / "energy.npz"
     exported = energy_train.to_mlp(net, {"layers": n_layers})
     mlp.save(path, exported.weights, exported.biases, exported.manifest)
     rows, w = _rows(n_layers, 36), _upper(36)
-    x = ms.energy_inputs(rows, w)
+    x = ms.energy_inputs(rows, w, view)
     with torch.no_grad():
         expected = torch.sigmoid(net(torch.as_tensor(x.reshape(-1, x.shape[-1]), dtype=torch.float32)))
     q = ms.fraction_rows(rows, w, mlp.load(path))
@@ -50,11 +51,12 @@ def test_the_augmentation_turns_the_inputs_of_a_stack_into_those_of_the_turned_s
     turned = energy_train.rotated(torch.as_tensor(x), n_layers, generator).numpy()
     angle = torch.rand(64, generator=torch.Generator().manual_seed(3)).numpy() * 2.0 * np.pi
     assert not np.allclose(turned, x)
+    at_w = slice(n_layers * ms.ENERGY_FEATURES, n_layers * ms.ENERGY_FEATURES + 3)
     c, s = np.cos(angle), np.sin(angle)
     for k in range(64):  # the sample's turn is its angle's, mirrored or not: check the whole input under each
         for sign in (1.0, -1.0):
             turn = np.array([[c[k], -s[k], 0], [s[k], c[k], 0], [0, 0, 1]]) @ np.diag([1.0, sign, 1.0])
-            if np.allclose(turn @ w[k], turned[k, -3:], atol=1e-6):
+            if np.allclose(turn @ w[k], turned[k, at_w], atol=1e-6):
                 stack = rows[k:k + 1].copy()
                 stack[0, :, layer_rows.ORIENTATION] = stack[0, :, layer_rows.ORIENTATION] @ turn.T
                 expected = ms.energy_inputs(stack, (turn @ w[k])[None])[0, 0]
@@ -62,6 +64,24 @@ def test_the_augmentation_turns_the_inputs_of_a_stack_into_those_of_the_turned_s
                 break
         else:
             pytest.fail(f"sample {k}: the direction was not turned by a rotation (and mirror) about the normal")
+
+
+def test_the_view_features_follow_a_smooth_tilted_flake_layer():
+    """For surface flakes tilted 60° about x, the mirror image of the view about the flake normal o = (0, −sin 60°,
+    cos 60°): along o it comes back along o (c² = 1, the projected area 1, up), and grazing from −y it goes down
+    into the stack; fibers give the area of their own distribution and no mirror, hg layers area 1 and nothing."""
+    o = np.array([0.0, -np.sin(np.pi / 3), 0.5])
+    rows = np.zeros((2, 3, layer_rows.ROW))
+    rows[:, :, layer_rows.TYPE] = [0, 1, 2]
+    rows[:, :, layer_rows.ROUGHNESS] = 0.1
+    rows[:, :, layer_rows.ORIENTATION] = o
+    w = np.stack([o, [0.0, 0.995, np.sqrt(1.0 - 0.995 ** 2)]])
+    f = ms.view_features(rows, w).reshape(2, 3, ms.ENERGY_VIEW_FEATURES)
+    np.testing.assert_allclose(f[0, 0], [1.0, 1.0, o[2]], atol=1e-12)
+    np.testing.assert_allclose(f[0, 1], [1.0, 0.1, 0.0], atol=1e-12)
+    np.testing.assert_allclose(f[:, 2], [[0.0, 1.0, 0.0]] * 2, atol=1e-12)
+    c = w[1] @ o
+    assert f[1, 0, 2] == pytest.approx(2.0 * c * o[2] - w[1, 2]) and f[1, 0, 2] < -0.4
 
 
 def test_a_view_from_below_takes_the_flipped_stack_seen_from_above():
