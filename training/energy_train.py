@@ -70,7 +70,7 @@ QUICK = Size(configs=8, chunk=4, n_wi=4, paths=200)
 VALIDATION = Size(configs=32, chunk=32, n_wi=16, paths=16000)
 VALIDATION_SEED = 1001
 TALLIES = ("unscattered", "single", "multiple")  # the walk's: ``validation.ENERGY_ARRAYS`` after rows and wi
-CONFIGS = {1: 4000, 2: 11200, 3: 4000, 4: 4000}  # stacks per layer count (what the networks measured saw)
+CONFIGS = {1: 12000, 2: 11200, 3: 4000, 4: 4000}  # stacks per layer count (what the networks measured saw)
 
 
 # ------------------------------------------------------------------------------------------------ data

@@ -143,6 +143,16 @@ def relative_energy_errors(energy: np.ndarray, samples: dict) -> np.ndarray:
     return np.where(truth > 1e-3 * truth.max(), np.abs(predicted - truth) / np.maximum(truth, 1e-300), np.nan)
 
 
+def per_view_energy_errors(energy: np.ndarray, samples: dict) -> np.ndarray:
+    """Per stack, Σ |predicted − E_ms| / Σ E_ms over its wi and channels of predicted multiple-scattering energies
+    (flat, in ``samples``' order): each view's own error, where ``relative_energy_errors`` lets views' errors of
+    opposite signs cancel; stacks left out as there (NaN)."""
+    n = samples["config"].max() + 1
+    miss = np.bincount(samples["config"], weights=np.abs(energy - samples["energy"]), minlength=n)
+    truth = np.bincount(samples["config"], weights=samples["energy"], minlength=n)
+    return np.where(truth > 1e-3 * truth.max(), miss / np.maximum(truth, 1e-300), np.nan)
+
+
 def error_summary(errors: np.ndarray) -> dict:
     kept = errors[~np.isnan(errors)]
     return {"configs": int(len(kept)), "mean_relative_energy_error": float(kept.mean()),
@@ -151,12 +161,16 @@ def error_summary(errors: np.ndarray) -> dict:
 
 def energy_errors(path, n_layers: int, net=None) -> dict:
     """The energy network (shipped, or ``net``) on a held-out energy file as the add-on evaluates q (numpy), times
-    left from the reference (``leftover``, the add-on's samples), against the walk's E_ms; with ``per_config``."""
+    left from the reference (``leftover``, the add-on's samples), against the walk's E_ms; with ``per_config`` and
+    the mean of ``per_view_energy_errors``."""
     data = load_energy_set(path, n_layers)
     left = np.stack([leftover(layer_rows.params_from_rows(stack), wi) for stack, wi in zip(data["rows"], data["wi"])])
     q = fraction_rows(np.repeat(data["rows"], data["wi"].shape[1], axis=0), data["wi"].reshape(-1, 3), net)
-    errors = fraction_errors(q.reshape(-1), energy_samples(data, left))
-    return {**error_summary(errors), "per_config": [None if np.isnan(e) else float(e) for e in errors]}
+    samples = energy_samples(data, left)
+    errors = fraction_errors(q.reshape(-1), samples)
+    per_view = per_view_energy_errors(q.reshape(-1) * samples["left"], samples)
+    return {**error_summary(errors), "mean_per_view_energy_error": float(np.nanmean(per_view)),
+            "per_config": [None if np.isnan(e) else float(e) for e in errors]}
 
 
 def model_energy_errors(path, n_layers: int, fraction: bool = True) -> dict:

@@ -630,14 +630,16 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "seed, never trained on; the random walk's tally of the light leaving by orders ≥ 2, 16 wi × 16000 "
               "paths per stack): the network's share q of what single scattering and the Dirac leave, times that "
               "leftover from the reference, against the walk, per stack summed over wi and channels "
-              "(docs/training.md, *The energy fraction network*). The model: the same measure of the reference's "
+              "(docs/training.md, *The energy fraction network*); per view: each view's own error, summed "
+              "(`validation.per_view_energy_errors`: views' errors of opposite signs do not cancel; it holds the "
+              "walk's noise too). The model: the same measure of the reference's "
               "multiple scattering at each wi (the network's lobes' albedo there times the energy scale at that "
               "view, `validation.model_energy_errors`), with the energy fraction and without it (the lobes' own "
               "energy, at most what single scattering leaves: what stacks of 3 and 4 layers render, and 1 and 2 layers "
               "before MS_VERSION 10). Mean / median / worst.", ""]
     if os.path.exists(sizes.energy_validation):
-        lines += ["| layers | stacks | network: mean energy error | median | worst | the model with the fraction | "
-                  "the model without it |", "|---|---|---|---|---|---|---|"]
+        lines += ["| layers | stacks | network: mean energy error | median | worst | per view | the model with the "
+                  "fraction | the model without it |", "|---|---|---|---|---|---|---|---|"]
 
         def triple(v):
             return " / ".join(pct(v[f"{k}_relative_energy_error"]) for k in ("mean", "median", "worst"))
@@ -645,13 +647,13 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
         for n in range(1, model.MAX_LAYERS + 1):
             without = validation.model_energy_errors(sizes.energy_validation, n, fraction=False)
             if n > NETWORK_LAYERS:  # no fraction network (docs/training.md): the lobes' own energy
-                lines.append(f"| {n} | {without['configs']} | none | | | not used | {triple(without)} |")
+                lines.append(f"| {n} | {without['configs']} | none | | | | not used | {triple(without)} |")
                 continue
             v = validation.energy_errors(sizes.energy_validation, n)
             with_fraction = validation.model_energy_errors(sizes.energy_validation, n)
             lines.append(f"| {n} | {v['configs']} | {pct(v['mean_relative_energy_error'])} | "
                          f"{pct(v['median_relative_energy_error'])} | {pct(v['worst_relative_energy_error'])} | "
-                         f"{triple(with_fraction)} | {triple(without)} |")
+                         f"{pct(v['mean_per_view_energy_error'])} | {triple(with_fraction)} | {triple(without)} |")
     else:
         lines.append("Not measured: the energy validation set is missing (`python -m training.energy_train "
                      "--validation-set FILE`).")

@@ -183,3 +183,12 @@ def test_the_model_returns_the_fraction_of_what_single_scattering_leaves_and_wit
     assert len(kept) >= 4
     np.testing.assert_allclose([with_fraction[k] for k in kept], [network_only[k] for k in kept], atol=0.02)
     assert max(abs(without[k] - with_fraction[k]) for k in kept) > 0.05
+
+
+def test_per_view_errors_count_what_the_summed_error_lets_cancel():
+    """A prediction 20% high at one view and 20% low at another of the same energy: the summed error is 0, the
+    per-view error 20%; a stack with too little energy to score is left out of both."""
+    samples = {"energy": np.array([1.0, 1.0, 0.5, 0.5, 1e-9, 1e-9]), "config": np.array([0, 0, 1, 1, 2, 2])}
+    predicted = np.array([1.2, 0.8, 0.55, 0.55, 1.0, 1.0])
+    np.testing.assert_allclose(validation.relative_energy_errors(predicted, samples), [0.0, 0.1, np.nan])
+    np.testing.assert_allclose(validation.per_view_energy_errors(predicted, samples), [0.2, 0.1, np.nan])
