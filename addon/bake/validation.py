@@ -76,7 +76,7 @@ def lobe_errors(data: dict, predicted: np.ndarray | None = None) -> dict:
     return {**out, "per_config": np.where(keep, rel, np.nan).tolist()}
 
 
-ALBEDO_PATHS = 200000  # random-walk paths per view of ``returned_light`` (its noise: ``walk_noise``, about 0.5%)
+ALBEDO_PATHS = 200000  # random-walk paths per view of ``returned_light`` (its noise, ``walk_noise``: 0.5–0.7%)
 NOISE_SEED_OFFSET = 1_000_003  # the second half-walk's seed, past any configuration index
 
 
