@@ -5,8 +5,8 @@ scattering and the Dirac leave, left(ω) = 1 − A_ss(ω) − T_δ(ω): q = 1 fo
 less where the layers absorb. One MLP per layer count predicts q per channel (the channels are independent
 random-walk experiments over the same paths) from the layers (``addon.bake.spongecake.energy_inputs``: the lobe
 network's features of the channel's rows and two more, then ω, then what ω meets in each layer):
-``energy_input_count(L, True)`` inputs, three hidden layers of 128 SiLU units, one output, q = sigmoid(output). The add-on scales the lobe network's lobes to q × left per
-view (``addon.bake.spongecake.fraction_limit``).
+``energy_input_count(L, True)`` inputs, three hidden layers of 128 SiLU units, one output, q = sigmoid(output). The
+add-on scales the lobe network's lobes to q × left per view (``addon.bake.spongecake.fraction_limit``).
 
 Data: its own, not the lobe dataset's. The lobe dataset's energies are sums over 128 uniform directions, which miss
 or over-weight the narrow multiply scattered peaks of low-roughness flakes (up to 4x the true energy on some stacks);

@@ -234,12 +234,18 @@ def normal_area_scale(rows, exponents) -> np.ndarray:
     ROW) and exponents (N, L). Along the normal σ² is α² + (1 − α²) cos² for flakes about a normal at cos to n,
     1 + (α² − 1) cos² for fibers along a tangent at cos to n (the SGGX matrices of ``reference.sggx``), 1 for hg."""
     rows = np.asarray(rows, dtype=np.float64)
-    kind, alpha2 = rows[..., rows_.TYPE], rows[..., rows_.ROUGHNESS] ** 2
     o = rows[..., rows_.ORIENTATION]
     cos2 = o[..., 2] ** 2 / np.maximum(np.sum(o * o, axis=-1), 1e-300)
-    flakes, fibers = alpha2 + (1.0 - alpha2) * cos2, 1.0 + (alpha2 - 1.0) * cos2
-    sigma2 = np.where(kind < 0.5, flakes, np.where(kind < 1.5, fibers, 1.0))
+    sigma2 = projected_area2(rows[..., rows_.TYPE], rows[..., rows_.ROUGHNESS] ** 2, cos2)
     return np.exp(np.sum(np.asarray(exponents) * np.log(np.maximum(sigma2, 1e-300)), axis=-1))
+
+
+def projected_area2(kind, alpha2, cos2):
+    """σ² of layers of type ``kind`` (row codes) and roughness² ``alpha2`` along a direction at cos² ``cos2`` to their
+    orientation: α² + (1 − α²) cos² for flakes, 1 + (α² − 1) cos² for fibers (the SGGX matrices of ``reference.sggx``),
+    1 for hg."""
+    flakes, fibers = alpha2 + (1.0 - alpha2) * cos2, np.maximum(1.0 + (alpha2 - 1.0) * cos2, 0.0)
+    return np.where(kind < 0.5, flakes, np.where(kind < 1.5, fibers, 1.0))
 
 
 def output_widths(n_layers: int) -> tuple:
@@ -416,8 +422,8 @@ def energy_inputs(rows: np.ndarray, w: np.ndarray, view: bool = True) -> np.ndar
 
 def view_features(rows: np.ndarray, w: np.ndarray) -> np.ndarray:
     """(N, L * ENERGY_VIEW_FEATURES) what the view w (N, 3) meets in each layer of stacks (N, L, ROW): c² for c = w·o
-    (o the unit orientation), the projected area σ(w) of the layer's SGGX distribution (research notes §1: surface
-    flakes √(α² + (1 − α²) c²), fibers √(1 + (α² − 1) c²); 1 for hg layers), and for surface flakes the z of w's
+    (o the unit orientation), the projected area σ(w) of the layer's SGGX distribution (``projected_area2``;
+    research notes §1), and for surface flakes the z of w's
     mirror image about o, 2 c o_z − w_z (where a smooth flake sends the light: back up, or down into the stack; 0
     for other layers). What the network would have to learn from products of its inputs, given: the light a tilted
     smooth layer multiply scatters follows these, not the azimuth alone. Unchanged by turns and mirrors about the
@@ -426,11 +432,8 @@ def view_features(rows: np.ndarray, w: np.ndarray) -> np.ndarray:
     o = rows[..., rows_.ORIENTATION]
     o = o / np.maximum(np.linalg.norm(o, axis=-1, keepdims=True), 1e-12)
     c = np.einsum("nlk,nk->nl", o, w)
-    a2 = np.clip(rows[..., rows_.ROUGHNESS], *ALPHA_RANGE) ** 2
-    surface, fiber = kind == 0, kind == 1
-    sigma = np.where(surface, np.sqrt(a2 + (1.0 - a2) * c * c),
-                     np.where(fiber, np.sqrt(np.maximum(1.0 + (a2 - 1.0) * c * c, 0.0)), 1.0))
-    flake = surface | fiber
+    sigma = np.sqrt(projected_area2(kind, np.clip(rows[..., rows_.ROUGHNESS], *ALPHA_RANGE) ** 2, c * c))
+    surface, flake = kind == 0, kind <= 1
     mirror_z = np.where(surface, 2.0 * c * o[..., 2] - w[:, None, 2], 0.0)
     out = np.stack([np.where(flake, c * c, 0.0), sigma, mirror_z], axis=-1)
     return out.reshape(len(rows), -1)
