@@ -286,6 +286,74 @@ def compared(row: dict, label, base) -> dict:
             "sampling_ratio": float(np.median(rounds)) if rounds else float("nan"), "sampling_rounds": rounds}
 
 
+# Nodes whose outputs Cycles computes at compile time when every input is a constant (constant folding); any other
+# node (geometry, texture, closure) is evaluated at each shading point.
+FOLDABLE_NODES = frozenset(("ShaderNodeMath", "ShaderNodeVectorMath", "ShaderNodeMix", "ShaderNodeMixRGB",
+                            "ShaderNodeSeparateXYZ", "ShaderNodeCombineXYZ", "ShaderNodeSeparateColor",
+                            "ShaderNodeCombineColor", "ShaderNodeValToRGB", "ShaderNodeClamp", "ShaderNodeMapRange"))
+
+
+def per_point_nodes(material) -> int:
+    """How many arithmetic nodes (``FOLDABLE_NODES``) of ``material`` Cycles evaluates at each shading point: those
+    that reach its output and take, through any chain of links and node groups, a value that varies over the
+    surface (the view, the normal, a texture); Cycles folds the others into constants. A measure of a node group's
+    shading cost that does not move between runs, as render times do."""
+    varying: dict = {}
+
+    def varies(path, node, socket) -> bool:
+        """Whether output ``socket`` of ``node``, in the group nodes ``path`` from the material's tree, varies."""
+        key = (tuple(n.name for n in path), node.name, socket.identifier)
+        if key not in varying:
+            varying[key] = _varies(path, node, socket)
+        return varying[key]
+
+    def linked_varies(path, socket) -> bool:
+        found = _source(path, socket)
+        return found is not None and varies(*found)
+
+    def _varies(path, node, socket) -> bool:
+        if node.bl_idname == "ShaderNodeGroup":
+            return linked_varies(path + (node,), _peer(_group_output(node.node_tree).inputs, socket))
+        if node.bl_idname in FOLDABLE_NODES:
+            return any(linked_varies(path, s) for s in node.inputs)
+        return node.bl_idname not in ("ShaderNodeValue", "ShaderNodeRGB")
+
+    seen, count = set(), 0
+    todo = [((), next(n for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"
+                      and n.is_active_output))]
+    while todo:
+        path, node = todo.pop()
+        key = (tuple(n.name for n in path), node.name)
+        if key in seen:
+            continue
+        seen.add(key)
+        count += node.bl_idname in FOLDABLE_NODES and any(varies(path, node, o) for o in node.outputs)
+        if node.bl_idname == "ShaderNodeGroup":
+            todo.append((path + (node,), _group_output(node.node_tree)))
+            continue
+        todo += [found[:2] for found in (_source(path, s) for s in node.inputs) if found is not None]
+    return count
+
+
+def _source(path, socket):
+    """(path, node, output socket) that feeds input ``socket``, through Group Input nodes; None if unlinked."""
+    while socket.is_linked:
+        link = socket.links[0]
+        if link.from_node.bl_idname != "NodeGroupInput":
+            return path, link.from_node, link.from_socket
+        path, socket = path[:-1], _peer(path[-1].inputs, link.from_socket)
+    return None
+
+
+def _peer(sockets, socket):
+    """The socket of ``sockets`` with ``socket``'s identifier (a group node's socket and its group's, inside)."""
+    return next(s for s in sockets if s.identifier == socket.identifier)
+
+
+def _group_output(tree):
+    return next(n for n in tree.nodes if n.bl_idname == "NodeGroupOutput" and n.is_active_output)
+
+
 def ratio_cells(c: dict, kind: str = "") -> list[str]:
     """A ``compared`` result's table cells: base s, other s, ratio, the rounds' range; ``kind`` "" (whole renders)
     or "sampling"."""

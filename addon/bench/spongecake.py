@@ -19,7 +19,7 @@ from ..reference import scenes as ref_scenes
 from ..reference import spongecake as reference
 from .common import (ACCURACY_SCENES, SAMPLING_FACTOR, approximation_header, approximation_rows, compared,
                      comparison_scenes, fitted_speed_section, mapping_errors, mapping_section, paired_render_times, pct,
-                     preset_render_times, ratio_cells, reference_throughput, timed)
+                     per_point_nodes, preset_render_times, ratio_cells, reference_throughput, timed)
 
 MODEL = model.ID
 
@@ -477,16 +477,22 @@ def bake_throughput(size: int) -> tuple[str, float]:
 def ms_render_times(names, samples: int, resolution: int, repeats: int) -> list[dict]:
     """Cycles render time of each preset with and without multiple scattering, both forms, on the sphere scene
     (``paired_render_times``: at ``samples`` and at ``SAMPLING_FACTOR`` times as many, in ``repeats`` rounds). Per
-    preset and form, ``compared``: with multiple scattering against without."""
+    preset and form, ``compared``: with multiple scattering against without; ``per_point_nodes``: the node group's
+    count without and with it."""
     from ..nodes import material as lamina_material
+
+    counts = {}
 
     def materials(name):
         data = presets.load(MODEL, name)
-        return {(form, ms): lamina_material.new_material(
+        mats = {(form, ms): lamina_material.new_material(
                     MODEL, model.params_from_dict({**data, "multiple_scattering": ms}), form)
                 for form in ("nodes", "osl") for ms in (False, True)}
+        counts[name] = tuple(per_point_nodes(mats["nodes", ms]) for ms in (False, True))
+        return mats
 
-    return [{"preset": r["preset"], **{form: compared(r, (form, True), (form, False)) for form in ("nodes", "osl")}}
+    return [{"preset": r["preset"], "per_point_nodes": counts[r["preset"]],
+             **{form: compared(r, (form, True), (form, False)) for form in ("nodes", "osl")}}
             for r in paired_render_times(names, materials, samples, resolution, repeats)]
 
 
@@ -787,6 +793,12 @@ def ms_speed_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "| preset | node group SS s | SS + MS s | ratio | per round | OSL SS s | SS + MS s | ratio | per round |",
               "|---|---|---|---|---|---|---|---|---|"]
     lines += [_speed_row(r, "sampling") for r in rows]
+    lines += ["", "What the node group computes at each shading point (`bench.common.per_point_nodes`: its arithmetic "
+              "nodes that depend on the view, the geometry or a texture; Cycles folds the rest into constants), a "
+              "count that does not move between runs:", "",
+              "| preset | node group SS | SS + MS | ratio |", "|---|---|---|---|"]
+    lines += [f"| {r['preset']} | {r['per_point_nodes'][0]} | {r['per_point_nodes'][1]} | "
+              f"{r['per_point_nodes'][1] / r['per_point_nodes'][0]:.2f} |" for r in rows]
     lines += ["", f"Baking multiple scattering into textures: **{per_mp:.2f} s per megapixel** ({what}; fastest of 2)."]
     return "\n".join(lines) + "\n"
 

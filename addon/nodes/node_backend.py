@@ -8,7 +8,7 @@ import bpy
 from .expr import (BULK_INPUT, MAX_CONDUCTOR_WEIGHT, MAX_MIX_WEIGHT, METAL_MIN_RATIO, MIN_COS, MIN_LOG, MIN_TANGENT,
                    lobe_fresnel, schlick_at_view)
 
-GENERATOR_VERSION = 10  # bump when generated shaders change, so cached groups are not reused
+GENERATOR_VERSION = 11  # bump when generated shaders change, so cached groups are not reused
 COLUMN = 190
 ROW = 150
 
@@ -200,6 +200,10 @@ class NodeBackend:
 
     # -- math
     def binary(self, op: str, a, b):
+        if isinstance(a, NodeValue) and _is_identity(op, b):
+            return a  # a · 1, a / 1, a + 0, a − 0: no node (Cycles would evaluate one where ``a`` varies)
+        if isinstance(b, NodeValue) and _is_identity(op, a, swapped=True):
+            return b
         if "color" in (_kind(a), _kind(b)):
             if _kind(a) == "float" and op == "MULTIPLY":
                 a, b = b, a
@@ -319,6 +323,8 @@ class NodeBackend:
         return self._math("MINIMUM", a, b)
 
     def scale(self, color, s):
+        if isinstance(color, NodeValue) and _is_identity("MULTIPLY", s):
+            return color
         node = self._node("ShaderNodeVectorMath", _depth(color, s), operation="SCALE")
         self._link_or_set(color, node.inputs[0])
         self._link_or_set(s, node.inputs["Scale"])
@@ -540,6 +546,15 @@ def _identity(v):
     if isinstance(v, (tuple, list)):
         return tuple(float(x) for x in v)
     return float(v)
+
+
+def _is_identity(op: str, v, swapped: bool = False) -> bool:
+    """Whether the constant ``v`` leaves the other operand of ``op`` as it is: 1 for MULTIPLY (either side) and
+    DIVIDE (divisor), 0 for ADD (either side) and SUBTRACT (subtrahend); ``swapped``: ``v`` is the first operand."""
+    if isinstance(v, NodeValue) or isinstance(v, (tuple, list)):
+        return False
+    unit = {"MULTIPLY": 1.0, "ADD": 0.0} if swapped else {"MULTIPLY": 1.0, "DIVIDE": 1.0, "ADD": 0.0, "SUBTRACT": 0.0}
+    return op in unit and float(v) == unit[op]
 
 
 def _as_color(v):

@@ -548,6 +548,8 @@ def _scattering(b, p: model.Params, mu, single_scale, multiple_scale) -> None:
     _multiple_scattering(lobes.multiple if lobes else multiple, p)
     if lobes:
         lobes.merge()
+    single.flush()
+    multiple.flush()
 
 
 def _single_scattering(b, p: model.Params, mu) -> None:
@@ -605,12 +607,16 @@ def _multiple_scattering(b, p: model.Params) -> None:
 
 class _EnergyScaled:
     """A backend that passes everything to ``b`` but multiplies the colour of each closure by ``scale`` (None: makes
-    no closure)."""
+    no closure). Closures without parameters (Diffuse, Translucent, Transparent) are summed by kind and made by
+    ``flush``, scaled once: the sum of the multiple-scattering colours is then a constant Cycles folds, and the view's
+    scale costs one multiplication per kind, not one per closure."""
 
     CLOSURES = ("glossy", "diffuse", "translucent", "transparent", "conductor", "dielectric")
+    LAMBERTS = ("diffuse", "translucent", "transparent")
 
     def __init__(self, b, scale):
         self._b, self._scale = b, scale
+        self._lamberts: dict[str, object] = {}
 
     def __getattr__(self, name):
         attr = getattr(self._b, name)
@@ -618,11 +624,24 @@ class _EnergyScaled:
             return attr
         if self._scale is None:
             return lambda *args, **kw: None
+        if name in self.LAMBERTS:
+            return lambda color: self._lamberts.update({name: _sum(self._lamberts.get(name), color)})
         return lambda color, *args, **kw: attr(self.scaled(color), *args, **kw)
 
     def scaled(self, color):
         """``color`` times the scale, None where there is none."""
         return None if self._scale is None else color * self._scale
+
+    def flush(self) -> None:
+        """Make the summed closures without parameters."""
+        for name, color in self._lamberts.items():
+            getattr(self._b, name)(self.scaled(color))
+        self._lamberts.clear()
+
+
+def _sum(a, b):
+    """a + b, where a None stands for nothing yet."""
+    return b if a is None else a + b
 
 
 class _GlossyRecorder:
@@ -643,8 +662,8 @@ class _GlossyRecorder:
 
 class _FiberLobes:
     """Node group with multiple scattering: each fiber layer's GGX lobe and the network's lobe for that layer become
-    one Glossy BSDF about the single-scattering lobe's tangent (one closure a fiber layer less to evaluate: the
-    cost of multiple scattering in the node group is mostly its closures, docs/training.md). Its colour is the two
+    one Glossy BSDF about the single-scattering lobe's tangent (one closure a fiber layer less to evaluate; the rest
+    of the cost is the nodes evaluated per shading point, docs/training.md). Its colour is the two
     colours' sum, each times its share of the energy budget (``single`` and ``multiple``: ``_EnergyScaled``); its
     α_x mixes theirs harmonically by the network lobe's share s of the colours before those scales (channel means),
     1/α_x = (1 − s)/α_x1 + s/α_x2, which keeps the weighted peak D(h = n) = 1/(π α_x α_y) of the highlight (α_y is 1

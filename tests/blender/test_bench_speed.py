@@ -66,10 +66,12 @@ def test_the_speed_page_shows_both_tables(monkeypatch):
                      "sampling": 1.4, "sampling_ratio": 1.45, "sampling_rounds": [1.3, 1.5]},
            "osl": {"base": 4.0, "other": 5.0, "ratio": 1.25, "rounds": [1.2, 1.3], "base_sampling": 2.0,
                    "sampling": 2.5, "sampling_ratio": float("nan"), "sampling_rounds": []}}
+    row["per_point_nodes"] = (120, 150)
     monkeypatch.setattr(bench, "ms_render_times", lambda *a: [row])
     monkeypatch.setattr(bench, "bake_throughput", lambda size: ("fake", 1.0))
     page = bench.ms_speed_markdown(bench.MsSizes(), 64, 192)
     assert "| fabric | 2.00 | 3.00 | 1.50 | 1.40–1.60 | 4.00 | 5.00 | 1.25 | 1.20–1.30 |" in page
+    assert "| fabric | 120 | 150 | 1.25 |" in page
     assert "| fabric | 1.00 | 1.40 | 1.45 | 1.30–1.50 | 2.00 | 2.50 | – | – |" in page  # the rounds' median ratio
     assert f"render at {64 * bench.SAMPLING_FACTOR} samples less its render at 64" in page
 
@@ -119,3 +121,51 @@ def test_the_fitted_mapping_is_timed_against_the_analytic_one_by_sampling_alone(
     row = next(line for line in lines if line.startswith("| plastic"))
     assert row == "| plastic | 3.00 | 2.70 | 0.90 | 0.90–0.90 | 3.00 | 2.70 | 0.90 | 0.90–0.90 |"
     assert blend_io.snapshot() == before
+
+
+def test_per_point_nodes_counts_what_varies_over_the_surface_through_groups_and_not_what_cycles_folds():
+    """A Math chain on the view (through a group's input and out of it) counts; the same chain on constants, a
+    group input left unlinked and a node that reaches no output do not."""
+    from addon.bench.common import per_point_nodes
+
+    group = bpy.data.node_groups.new("lamina test per-point", "ShaderNodeTree")
+    group.interface.new_socket("x", in_out="INPUT", socket_type="NodeSocketFloat")
+    group.interface.new_socket("y", in_out="INPUT", socket_type="NodeSocketFloat")
+    group.interface.new_socket("sum", in_out="OUTPUT", socket_type="NodeSocketFloat")
+    group.interface.new_socket("twice y", in_out="OUTPUT", socket_type="NodeSocketFloat")
+    g_in, g_out = group.nodes.new("NodeGroupInput"), group.nodes.new("NodeGroupOutput")
+    add, twice = group.nodes.new("ShaderNodeMath"), group.nodes.new("ShaderNodeMath")
+    add.operation, twice.operation = "ADD", "MULTIPLY"
+    group.links.new(g_in.outputs["x"], add.inputs[0])
+    group.links.new(g_in.outputs["y"], add.inputs[1])
+    group.links.new(g_in.outputs["y"], twice.inputs[0])
+    group.links.new(add.outputs[0], g_out.inputs["sum"])
+    group.links.new(twice.outputs[0], g_out.inputs["twice y"])
+
+    mat, tree, out = material.empty_material("lamina test per-point")
+    nodes, links = tree.nodes, tree.links
+    bsdf = nodes.new("ShaderNodeBsdfGlossy")
+    geometry, value = nodes.new("ShaderNodeNewGeometry"), nodes.new("ShaderNodeValue")
+    on_view, on_value, unused = (nodes.new("ShaderNodeVectorMath"), nodes.new("ShaderNodeMath"),
+                                 nodes.new("ShaderNodeMath"))
+    on_view.operation = "LENGTH"
+    links.new(geometry.outputs["Incoming"], on_view.inputs[0])
+    links.new(value.outputs[0], on_value.inputs[0])
+    links.new(geometry.outputs["Incoming"], unused.inputs[0])
+    varying_group, constant_group = nodes.new("ShaderNodeGroup"), nodes.new("ShaderNodeGroup")
+    varying_group.node_tree = constant_group.node_tree = group
+    links.new(on_view.outputs["Value"], varying_group.inputs["x"])  # its y unlinked: "twice y" stays constant
+    links.new(on_value.outputs[0], constant_group.inputs["x"])
+    after = nodes.new("ShaderNodeMath")
+    links.new(varying_group.outputs["sum"], after.inputs[0])
+    links.new(varying_group.outputs["twice y"], after.inputs[1])
+    links.new(after.outputs[0], bsdf.inputs["Roughness"])
+    links.new(constant_group.outputs["sum"], bsdf.inputs["Anisotropy"])
+    links.new(bsdf.outputs[0], out.inputs["Surface"])
+    try:
+        assert per_point_nodes(mat) == 3  # on_view, the varying group's ADD, after
+        links.new(on_view.outputs["Value"], varying_group.inputs["y"])
+        assert per_point_nodes(mat) == 4  # and its MULTIPLY
+    finally:
+        bpy.data.materials.remove(mat)
+        bpy.data.node_groups.remove(group)

@@ -182,6 +182,25 @@ def test_a_node_group_computes_each_pure_operation_once():
         bpy.data.node_groups.remove(tree)
 
 
+def test_an_operation_with_its_identity_makes_no_node():
+    """a · 1, 1 · a, a / 1, a + 0, 0 + a and a − 0 are a itself, for floats and colours (a node on a varying value is
+    a node Cycles evaluates at every shading point); 1 / a and 0 − a are operations."""
+    import bpy
+    from addon.nodes.node_backend import NodeBackend
+
+    tree = bpy.data.node_groups.new("lamina identity test", "ShaderNodeTree")
+    try:
+        b = NodeBackend(tree, tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput"))
+        mu, view = b.cos_view(), b.view()
+        made = len(tree.nodes)
+        for a in (mu, view):
+            assert all(x is a for x in (a * 1.0, 1.0 * a, a / 1.0, a + 0.0, 0.0 + a, a - 0.0))
+        assert b.scale(view, 1.0) is view and len(tree.nodes) == made
+        assert (1.0 / mu) is not mu and (0.0 - mu) is not mu and len(tree.nodes) == made + 2
+    finally:
+        bpy.data.node_groups.remove(tree)
+
+
 def test_a_shared_computation_is_one_nested_group_that_every_tree_reuses():
     """``NodeBackend.shared`` builds its body once, as a nested group whose outputs are the body's values (a float and
     a colour here), and each tree that calls it gets one Group node of it, linked to the arguments, instead of the
