@@ -23,6 +23,7 @@ scored at export, against left from the reference as the add-on computes it.
 
     python -m training.energy_train --data ~/.cache/lamina/spongecake-ms-energy --layers 1 2 --out addon/bake/weights
     python -m training.energy_train --layers 1 2 3 4 --validation-set tests/data/spongecake_ms_energy_validation.npz
+    python -m training.energy_train --layers 1 2 --ensemble <run 1> <run 2> --out addon/bake/weights
 """
 from __future__ import annotations
 
@@ -263,6 +264,56 @@ def export(net, info: dict, samples: dict, data: dict, n_layers: int, out: Path,
     return manifest
 
 
+def averaged(nets: list) -> tuple[list, list]:
+    """Weights and biases of one MLP whose output is the mean of ``nets``' outputs (an ensemble; the same inputs,
+    depth and activation): their hidden units side by side, each member's layers in a block of their own, and the
+    last layer's weights stacked and divided by the count."""
+    weights = [np.concatenate([n.weights[0] for n in nets], axis=1)]
+    for i in range(1, len(nets[0].weights) - 1):
+        weights.append(_block_diagonal([n.weights[i] for n in nets]))
+    weights.append(np.concatenate([n.weights[-1] for n in nets], axis=0) / len(nets))
+    biases = [np.concatenate([n.biases[i] for n in nets]) for i in range(len(nets[0].biases) - 1)]
+    biases.append(np.mean([n.biases[-1] for n in nets], axis=0))
+    return weights, biases
+
+
+def _block_diagonal(blocks: list) -> np.ndarray:
+    out = np.zeros((sum(b.shape[0] for b in blocks), sum(b.shape[1] for b in blocks)))
+    r = c = 0
+    for b in blocks:
+        out[r:r + b.shape[0], c:c + b.shape[1]] = b
+        r, c = r + b.shape[0], c + b.shape[1]
+    return out
+
+
+MEMBER_KEYS = ("steps", "best_step", "training_seconds", "split_validation", "held_out_validation", "date",
+               "code_version")
+
+
+def export_ensemble(folders: list, n_layers: int, out: Path, held_out: Path | None, log=print) -> dict:
+    """The mean of the energy networks for ``n_layers`` in ``folders`` (trained with different ``--seed``s on the
+    same data: their errors differ from run to run more than the held-out set resolves, and their mean varies
+    less), as one network (``averaged``) in ``out``, scored on the held-out set."""
+    name = ms.energy_weights_path(n_layers).name
+    nets = [mlp.load(Path(f) / name) for f in folders]
+    weights, biases = averaged(nets)
+    first = nets[0].manifest
+    manifest = {**{k: v for k, v in first.items() if k not in MEMBER_KEYS + ("held_out_per_config",)},
+                "hidden": [w.shape[1] for w in weights[:-1]], "ensemble_of": [
+                    {k: n.manifest.get(k) for k in MEMBER_KEYS} for n in nets],
+                "training_seconds": round(sum(n.manifest["training_seconds"] for n in nets), 1),
+                "date": datetime.date.today().isoformat(), "code_version": code_version()}
+    if held_out is not None and Path(held_out).exists():
+        scores = validation.energy_errors(held_out, n_layers, mlp.MLP(tuple(weights), tuple(biases), manifest))
+        manifest["held_out_validation"] = {k: v for k, v in scores.items() if k != "per_config"}
+        manifest["held_out_per_config"] = scores["per_config"]
+    path = Path(out) / name
+    mlp.save(path, weights, biases, manifest)
+    mlp.load.cache_clear()
+    log(f"wrote {path}: the mean of {len(nets)} networks: " + json.dumps(manifest.get("held_out_validation")))
+    return manifest
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.energy_train", description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_CACHE, help=f"cache folder (default {DEFAULT_CACHE})")
@@ -280,8 +331,16 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="a tiny dataset and a few seconds of training (tests)")
     ap.add_argument("--no-view-features", dest="view", action="store_false",
                     help="the first input format, without what the view meets in each layer (to compare)")
+    ap.add_argument("--ensemble", type=Path, nargs="+", metavar="FOLDER",
+                    help="write to --out the mean of the networks in these folders (``averaged``) and stop")
     a = ap.parse_args(argv)
     torch.set_num_threads(a.threads)
+    if a.ensemble:
+        if a.out is None:
+            ap.error("--out is needed for --ensemble")
+        for n_layers in a.layers:
+            export_ensemble(a.ensemble, n_layers, a.out, a.validation)
+        return 0
     if a.validation_set:
         size = QUICK if a.quick else VALIDATION
         write_validation_set(a.validation_set, a.layers, size, a.workers)

@@ -134,6 +134,27 @@ def test_quick_energy_data_train_export_load(tmp_path, monkeypatch):
     mlp.load.cache_clear()
 
 
+def test_an_ensemble_is_one_network_whose_output_is_its_members_mean(tmp_path):
+    """``energy_train.averaged``: members of different widths side by side, through the shipped float32 format, give
+    the mean of their raw outputs (and so a fraction between theirs)."""
+    n_in = ms.energy_input_count(2, True)
+    members = []
+    for seed, width in ((1, 16), (2, 24)):
+        rng = np.random.default_rng(seed)
+        shapes = [(n_in, width), (width, width), (width, width), (width, 1)]
+        members.append(mlp.MLP(tuple(rng.normal(0, 0.5, s) for s in shapes),
+                               tuple(rng.normal(0, 0.5, s[1]) for s in shapes), {"activation": "silu"}))
+    weights, biases = energy_train.averaged(members)
+    mlp.save(tmp_path / "mean.npz", weights, biases, {"activation": "silu"})
+    mean = mlp.load(tmp_path / "mean.npz")
+    x = np.random.default_rng(3).normal(size=(64, n_in))
+    outputs = [m(x) for m in members]
+    np.testing.assert_allclose(mean(x), 0.5 * (outputs[0] + outputs[1]), rtol=1e-4, atol=1e-5)
+    assert np.abs(outputs[0] - outputs[1]).mean() > 0.1  # so the test can fail
+    assert [w.shape[1] for w in mean.weights] == [40, 40, 40, 1]
+    mlp.load.cache_clear()
+
+
 @pytest.mark.parametrize("n_layers", [1, 2])
 def test_shipped_energy_networks_meet_their_recorded_held_out_error(n_layers):
     net = ms.energy_network(n_layers)
@@ -142,9 +163,10 @@ def test_shipped_energy_networks_meet_their_recorded_held_out_error(n_layers):
     assert scores["configs"] == recorded["configs"]
     for key in ("mean_relative_energy_error", "worst_relative_energy_error"):
         assert scores[key] == pytest.approx(recorded[key], rel=1e-3), key
-    for key in ("training_configs", "paths_per_wi", "dataset_seed", "date", "code_version",
-                "split_validation"):
+    members = net.manifest.get("ensemble_of", [net.manifest])
+    for key in ("training_configs", "paths_per_wi", "dataset_seed", "date", "code_version"):
         assert key in net.manifest, key
+    assert all("split_validation" in m and "steps" in m for m in members)
     assert ms.energy_weights_path(n_layers).stat().st_size < 400_000
     json.dumps(net.manifest)
 
