@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import numbers
 
 import bpy
 
@@ -551,7 +552,7 @@ def _identity(v):
 def _is_identity(op: str, v, swapped: bool = False) -> bool:
     """Whether the constant ``v`` leaves the other operand of ``op`` as it is: 1 for MULTIPLY (either side) and
     DIVIDE (divisor), 0 for ADD (either side) and SUBTRACT (subtrahend); ``swapped``: ``v`` is the first operand."""
-    if isinstance(v, NodeValue) or isinstance(v, (tuple, list)):
+    if not isinstance(v, numbers.Real):
         return False
     unit = {"MULTIPLY": 1.0, "ADD": 0.0} if swapped else {"MULTIPLY": 1.0, "DIVIDE": 1.0, "ADD": 0.0, "SUBTRACT": 0.0}
     return op in unit and float(v) == unit[op]

@@ -66,7 +66,7 @@ import numpy as np
 from ..models import spongecake as model
 from ..models.params import Param
 from .closures_np import SHARP_ALBEDO
-from .expr import NumpyBackend, closure_furnace, schlick, schlick_at_view
+from .expr import LAMBERT_CLOSURES, NumpyBackend, closure_furnace, schlick, schlick_at_view
 
 
 # Every approximation the mapping makes, with a configuration that isolates it (docs/accuracy.md measures
@@ -612,7 +612,6 @@ class _EnergyScaled:
     scale costs one multiplication per kind, not one per closure."""
 
     CLOSURES = ("glossy", "diffuse", "translucent", "transparent", "conductor", "dielectric")
-    LAMBERTS = ("diffuse", "translucent", "transparent")
 
     def __init__(self, b, scale):
         self._b, self._scale = b, scale
@@ -624,7 +623,7 @@ class _EnergyScaled:
             return attr
         if self._scale is None:
             return lambda *args, **kw: None
-        if name in self.LAMBERTS:
+        if name in LAMBERT_CLOSURES:
             return lambda color: self._lamberts.update({name: _sum(self._lamberts.get(name), color)})
         return lambda color, *args, **kw: attr(self.scaled(color), *args, **kw)
 
