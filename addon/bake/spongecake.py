@@ -71,14 +71,15 @@ ALPHA_RANGE = (0.01, 1.0)
 G_MAX = 0.95
 THICKNESS_IN = (0.01, 10.0)
 THICKNESS_OUT = (0.01, 20.0)
-MS_VERSION = 11  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
+MS_VERSION = 12  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
 # stack's scale over the view's azimuth too (``nodes.spongecake.view_inputs``), 5 the energy budget (``energy_budget``),
 # 6 its view tables made safe along the view cosine too (``budget_rows``), 7 the forward lobe (``decode``), 8 each
 # form's budget on its own prediction (the node group's merged fiber lobes: ``nodes.spongecake._FiberLobes``), 9 one
 # ``MS Energy`` input fed from a view table for every stack (``nodes.spongecake.budget_table``), 10 the energy
 # fraction's network for stacks of 1 or 2 layers without a substrate (``energy_fraction``), with budget tables
 # that follow a texture-driven input (``driven_budget_rows``), 11 the forward lobe scaled by the layers' projected
-# areas (``AREA``; the Cycles forms' along the normal: ``cycles_weights``)
+# areas (``AREA``; the Cycles forms' along the normal: ``cycles_weights``), 12 the reference's energy table on twice
+# the knots (``models.spongecake.ENERGY_KNOTS``: what fits with multiple scattering match)
 NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
 
 

@@ -236,7 +236,7 @@ def test_the_interpolation_keeps_below_a_convex_scale():
     table = _table(wavy)
     over = ref.energy_at(table, wo)[:, 0] - wavy(u, phi)
     bilinear_over = _bilinear(table, u, phi) - wavy(u, phi)
-    assert bilinear_over.max() > 0.02  # plain bilinear interpolation overshoots here
+    assert bilinear_over.max() > 0.01  # plain bilinear interpolation overshoots here (0.015 on 16 knots)
     assert over.max() < 0.05 * bilinear_over.max(), over.max()
     assert np.mean(np.abs(over)) < np.mean(np.abs(bilinear_over))
 
@@ -277,16 +277,16 @@ def test_the_reference_follows_the_azimuth_of_oriented_stacks():
     p = _params(OTHERS["tilted flakes over in-plane fibers"])
     above, below = ref.energy_tables(p)
     phi = bake.energy_azimuths(p)
-    assert above.shape == below.shape == (model.ENERGY_KNOTS, model.ENERGY_AZIMUTHS, 3) == (8, len(phi), 3)
+    assert above.shape == below.shape == (model.ENERGY_KNOTS, model.ENERGY_AZIMUTHS, 3) == (16, len(phi), 3)
     assert np.ptp(above[-3], axis=0).max() > 0.05  # the scale does vary with the azimuth
-    mu = np.asarray(model.energy_cosines())[[2, 5, 7]]
+    mu = np.asarray(model.energy_cosines())[[4, 10, 15]]
     wo = spherical(np.repeat(mu, len(phi)), np.tile(phi, len(mu)))
     a = ref.furnace_albedo(p, wo, seed=5)
     single = ref.furnace_albedo(replace(p, multiple_scattering=False), wo, seed=5)
     least = single + ref.energy_at(above.min(axis=1, keepdims=True), wo) * ref.network_albedo(p, bake.predict(p), wo)
     assert np.mean(np.abs(a - 1.0)) <= 0.03 and a.max() <= 1.03, a[:, 0]
     assert np.mean(np.abs(a - 1.0)) < 0.5 * np.mean(np.abs(least - 1.0)) and least.max() <= 1.03
-    assert ref.energy_tables(_params({"layers": WHITE["four layers"]}))[0].shape == (8, 1, 3)
+    assert ref.energy_tables(_params({"layers": WHITE["four layers"]}))[0].shape == (16, 1, 3)
 
 
 @pytest.mark.parametrize("form", ["osl", "nodes"])
