@@ -96,8 +96,8 @@ def silu_mlp(sizes) -> torch.nn.Sequential:
     return torch.nn.Sequential(*modules)
 
 
-def make_network(n_layers: int, area: bool = False) -> torch.nn.Sequential:
-    net = silu_mlp((n_layers * ms.FEATURES, *HIDDEN, outputs(n_layers, area)))
+def make_network(n_layers: int, area: bool = False, hidden: tuple = HIDDEN) -> torch.nn.Sequential:
+    net = silu_mlp((n_layers * ms.FEATURES, *hidden, outputs(n_layers, area)))
     last = net[-1]
     forward = n_layers * ms.OUTPUTS + ms.WEIGHT_OUTPUTS
     with torch.no_grad():
@@ -106,6 +106,11 @@ def make_network(n_layers: int, area: bool = False) -> torch.nn.Sequential:
         last.bias[forward:forward + ms.FORWARD_OUTPUTS] = torch.tensor(FORWARD_START)
         last.bias[outputs(n_layers):] = AREA_START
     return net.double().to(DEVICE)
+
+
+def hidden_of(net: mlp.MLP) -> tuple:
+    """The hidden layers' widths of an exported network."""
+    return tuple(w.shape[1] for w in net.weights[:-1])
 
 
 def warm_start(net: torch.nn.Sequential, shipped: mlp.MLP) -> None:
@@ -262,16 +267,17 @@ def cosine_step(opt, loss, base_rate: float, frac: float) -> None:
 
 
 def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int = 32, init: mlp.MLP | None = None,
-          log=print, area: bool = False):
+          log=print, area: bool = False, hidden: tuple = HIDDEN):
     """Train for ``minutes``, from ``make_network``'s start or, with ``init``, from an exported network
     (``warm_start``); returns the network at its best split-validation loss (checked every few seconds) and what
-    happened. ``area``: the candidate form with the area exponents (module docstring)."""
+    happened. ``area``: the candidate form with the area exponents (module docstring); ``hidden``: the hidden
+    layers' widths (a warm start takes its network's)."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     order = rng.permutation(len(data["rows"]))
     n_val = max(1, len(order) // 10)
     val, train_idx = order[:n_val], order[n_val:]
-    net = make_network(n_layers, area)
+    net = make_network(n_layers, area, hidden if init is None else hidden_of(init))
     if init is not None:
         warm_start(net, init)
     opt = torch.optim.AdamW(net.parameters(), lr=LEARNING_RATE, weight_decay=WEIGHT_DECAY)
@@ -312,7 +318,7 @@ def record_held_out(path: Path, held_out: Path, training_form: bool = False) -> 
     n_layers = shipped.manifest["layers"]
     data = dataset.load(held_out, n_layers)
     if training_form:
-        net = make_network(n_layers, shipped.weights[-1].shape[1] > outputs(n_layers))
+        net = make_network(n_layers, shipped.weights[-1].shape[1] > outputs(n_layers), hidden_of(shipped))
         warm_start(net, shipped)
         scores = lobe_errors(net, data)
     else:
@@ -345,7 +351,7 @@ def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path
     split = {k: v for k, v in lobe_errors(net, val).items() if k != "per_config"}
     manifest = {
         "model": "spongecake multiple scattering", "layers": n_layers, "inputs": n_layers * ms.FEATURES,
-        "hidden": list(HIDDEN), "activation": "silu", "outputs": int(net[-1].bias.shape[0]),
+        "hidden": [m.weight.shape[0] for m in net if isinstance(m, torch.nn.Linear)][:-1], "activation": "silu", "outputs": int(net[-1].bias.shape[0]),
         "area_exponents": int(net[-1].bias.shape[0]) > outputs(n_layers),
         "training_configs": info["train_configs"], "pairs_per_config": int(data["ms"].shape[1] * data["ms"].shape[2]),
         "paths_per_wi": metas[0]["paths"], "max_depth": metas[0]["max_depth"], "dataset_seed": metas[0]["seed"],
@@ -384,6 +390,8 @@ def main(argv=None) -> int:
     ap.add_argument("--area", action="store_true",
                     help="scale the forward lobe by the layers' projected areas to a predicted power (one more "
                          "output per layer)")
+    ap.add_argument("--hidden", type=int, nargs="+", default=list(HIDDEN),
+                    help="hidden layers' widths of a network trained from scratch (--init takes its network's)")
     ap.add_argument("--quick", action="store_true", help="a few seconds of training (tests)")
     ap.add_argument("--rescore", action="store_true",
                     help="only re-score the weights in --out on --validation and record it in their manifests")
@@ -414,7 +422,7 @@ def main(argv=None) -> int:
               flush=True)
         init = mlp.load(Path(a.init) / ms.weights_path(n_layers).name) if a.init else None
         net, info = train(data, n_layers, minutes, seed=a.seed, batch=4 if a.quick else a.batch, init=init,
-                          area=a.area)
+                          area=a.area, hidden=tuple(a.hidden))
         if init is not None:
             info["init"] = {k: init.manifest.get(k) for k in ("training_configs", "steps", "training_seconds", "date",
                                                                "code_version", "held_out_validation", "outputs")}

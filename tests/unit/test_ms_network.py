@@ -120,6 +120,14 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
                        "--threads", "1", "--layers", "1", "--init", str(weights)]) == 0
     first = mlp.load(weights / ms.weights_path(1).name).manifest
     assert mlp.load(again / ms.weights_path(1).name).manifest["warm_started_from"]["steps"] == first["steps"]
+    narrow, onwards = tmp_path / "narrow", tmp_path / "onwards"  # another width; a warm start keeps its network's
+    assert train.main(["--quick", "--data", str(data_dir), "--out", str(narrow), "--validation", str(data_dir),
+                       "--threads", "1", "--layers", "1", "--hidden", "24", "24"]) == 0
+    assert train.main(["--quick", "--data", str(data_dir), "--out", str(onwards), "--validation", str(data_dir),
+                       "--threads", "1", "--layers", "1", "--init", str(narrow)]) == 0
+    for folder in (narrow, onwards):
+        net = mlp.load(folder / ms.weights_path(1).name)
+        assert net.manifest["hidden"] == [24, 24] == [w.shape[1] for w in net.weights[:-1]]
     packed = tmp_path / "pack.npz"  # one compact file to train on another machine
     assert dataset.main(["--out", str(data_dir), "--pack", str(packed)]) == 0
     for n_layers in (1, 2):
