@@ -108,11 +108,6 @@ def make_network(n_layers: int, area: bool = False, hidden: tuple = HIDDEN) -> t
     return net.double().to(DEVICE)
 
 
-def hidden_of(net: mlp.MLP) -> tuple:
-    """The hidden layers' widths of an exported network."""
-    return tuple(w.shape[1] for w in net.weights[:-1])
-
-
 def warm_start(net: torch.nn.Sequential, shipped: mlp.MLP) -> None:
     """Load an exported network's weights into ``net`` (training goes on from it). A network exported before the
     forward lobe has FORWARD_OUTPUTS fewer outputs, one without the area exponents (``--area``) one per layer fewer:
@@ -277,7 +272,7 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
     order = rng.permutation(len(data["rows"]))
     n_val = max(1, len(order) // 10)
     val, train_idx = order[:n_val], order[n_val:]
-    net = make_network(n_layers, area, hidden if init is None else hidden_of(init))
+    net = make_network(n_layers, area, hidden if init is None else init.hidden)
     if init is not None:
         warm_start(net, init)
     opt = torch.optim.AdamW(net.parameters(), lr=LEARNING_RATE, weight_decay=WEIGHT_DECAY)
@@ -318,7 +313,7 @@ def record_held_out(path: Path, held_out: Path, training_form: bool = False) -> 
     n_layers = shipped.manifest["layers"]
     data = dataset.load(held_out, n_layers)
     if training_form:
-        net = make_network(n_layers, shipped.weights[-1].shape[1] > outputs(n_layers), hidden_of(shipped))
+        net = make_network(n_layers, shipped.weights[-1].shape[1] > outputs(n_layers), shipped.hidden)
         warm_start(net, shipped)
         scores = lobe_errors(net, data)
     else:

@@ -32,6 +32,11 @@ class MLP:
     def n_inputs(self) -> int:
         return self.weights[0].shape[0]
 
+    @property
+    def hidden(self) -> tuple:
+        """The hidden layers' widths."""
+        return tuple(w.shape[1] for w in self.weights[:-1])
+
     def __call__(self, x: np.ndarray) -> np.ndarray:
         activation = ACTIVATIONS[self.manifest.get("activation", "silu")]
         h = np.asarray(x, dtype=np.float64)
