@@ -1,6 +1,7 @@
 """Train the SpongeCake multiple-scattering networks (Wang et al. 2022, Sec. 5 "Training") and export them.
 
-One MLP per layer count: ``L * FEATURES`` inputs, three hidden layers of 128 SiLU units,
+One MLP per layer count: ``L * FEATURES`` inputs, three hidden layers of 128 SiLU units (``--hidden``; the shipped
+two-layer network has 192),
 ``L * OUTPUTS + WEIGHT_OUTPUTS + FORWARD_OUTPUTS`` outputs (``addon.bake.spongecake`` documents the encoding). SiLU rather than ReLU: the predicted parameters
 are then smooth (C-infinity) functions of the layer parameters, so texture-driven bakes vary smoothly between
 texels, and no unit dies on a small dataset. Loss: MAE between the Monte Carlo multiple-scattering lobe and
