@@ -42,6 +42,7 @@ from training.spongecake_torch import LayerBatch, eval_stack, projected_area
 HIDDEN = (128, 128, 128)
 LEARNING_RATE = 1e-3
 WEIGHT_DECAY = 1e-4  # AdamW; a few thousand configurations per network: keep the 3x128 MLP from memorising them
+SPLIT_SEED = 0  # which configurations are held out for split validation: the same whatever --seed
 ENERGY_WEIGHT = 2.0  # energy matters most in renders (and the furnace); see lobe_loss
 ENERGY_FLOOR = 1e-3  # about the median configuration's mean f |cos wo| of multiple scattering in the dataset
 VALIDATION_SET = Path(__file__).resolve().parents[1] / "tests" / "data" / "spongecake_ms_validation"
@@ -267,10 +268,11 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
     """Train for ``minutes``, from ``make_network``'s start or, with ``init``, from an exported network
     (``warm_start``); returns the network at its best split-validation loss (checked every few seconds) and what
     happened. ``area``: the candidate form with the area exponents (module docstring); ``hidden``: the hidden
-    layers' widths (a warm start takes its network's)."""
+    layers' widths (a warm start takes its network's). ``seed`` sets the start and the batches; the split into
+    training and validation configurations is ``SPLIT_SEED``'s for every seed, so that runs compare on one split."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    order = rng.permutation(len(data["rows"]))
+    order = np.random.default_rng(SPLIT_SEED).permutation(len(data["rows"]))
     n_val = max(1, len(order) // 10)
     val, train_idx = order[:n_val], order[n_val:]
     net = make_network(n_layers, area, hidden if init is None else init.hidden)
@@ -299,7 +301,7 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
                     f"validation loss {val_loss:.3e} (best {best[0]:.3e})  ({time.time() - start:.0f} s)", flush=True)
     if best[1] is not None:
         net.load_state_dict(best[1])
-    return net, {"epochs": epoch, "steps": step, "best_step": best[2], "batch": batch, "device": str(DEVICE),
+    return net, {"seed": seed, "epochs": epoch, "steps": step, "best_step": best[2], "batch": batch, "device": str(DEVICE),
                  "seconds": round(time.time() - start, 1),
                  "train_configs": int(len(train_idx)), "split_validation_configs": int(n_val), "val_index": val}
 
@@ -352,7 +354,7 @@ def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path
         "training_configs": info["train_configs"], "pairs_per_config": int(data["ms"].shape[1] * data["ms"].shape[2]),
         "paths_per_wi": metas[0]["paths"], "max_depth": metas[0]["max_depth"], "dataset_seed": metas[0]["seed"],
         "dataset_version": metas[0]["version"], "epochs": info["epochs"], "steps": info["steps"], "best_step": info["best_step"],
-        "batch": info["batch"], "device": info["device"],
+        "batch": info["batch"], "device": info["device"], "seed": info["seed"], "split_seed": SPLIT_SEED,
         "dataset_worker_seconds": round(sum(m.get("seconds", 0.0) for m in metas)),
         "training_seconds": info["seconds"], "split_validation": split, "dataset_noise": dataset.noise(data),
         "date": datetime.date.today().isoformat(), "code_version": code_version(),
@@ -378,7 +380,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, required=True, help="folder for the .npz weights (addon/bake/weights ships)")
     ap.add_argument("--validation", type=Path, default=VALIDATION_SET)
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0,
+                    help=f"the network's start and batches (the split is the same for every seed: {SPLIT_SEED})")
     ap.add_argument("--device", default="cpu", help="torch device to train on (cuda where a GPU is lent)")
     ap.add_argument("--batch", type=int, default=32, help="configurations per mini-batch")
     ap.add_argument("--init", type=Path, help="folder of exported weights to go on training from (warm start; a "

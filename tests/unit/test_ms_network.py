@@ -128,6 +128,10 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
     for folder in (narrow, onwards):
         net = mlp.load(folder / ms.weights_path(1).name)
         assert net.manifest["hidden"] == [24, 24] == [w.shape[1] for w in net.weights[:-1]]
+    one = dataset.load(data_dir, 1)  # another --seed: another start and batches, the same split
+    (net_a, info_a), (net_b, info_b) = (train.train(one, 1, 0.002, seed=s, log=lambda *a, **k: None) for s in (0, 1))
+    assert np.array_equal(info_a["val_index"], info_b["val_index"]) and len(info_a["val_index"]) < len(one["rows"])
+    assert not torch.equal(net_a[0].weight, net_b[0].weight)
     packed = tmp_path / "pack.npz"  # one compact file to train on another machine
     assert dataset.main(["--out", str(data_dir), "--pack", str(packed)]) == 0
     for n_layers in (1, 2):
