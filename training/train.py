@@ -8,7 +8,7 @@ texels, and no unit dies on a small dataset. Loss: MAE between the Monte Carlo m
 W1 f_ss(params') + W2 / pi + f_ss(forward), both times |cos wo| (the differentiable ``training.spongecake_torch.eval_stack``),
 AdamW (weight decay 1e-4), learning rate 1e-3 with cosine decay, the checkpoint with the best split-validation
 loss kept, mini-batches of 32 configurations (every direction pair of a
-configuration in the same batch). 10% of the configurations are held out for validation; the shipped,
+configuration in the same batch). 10% of the configurations are held out for validation (the same ones for every ``--seed``: ``SPLIT_SEED``); the shipped,
 independently seeded validation set (tests/data) is scored at export and its errors go into the manifest.
 
     python -m training.train --data ~/.cache/lamina/spongecake-ms --layers 1 --threads 1 --minutes 30 --out addon/bake/weights
