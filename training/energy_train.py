@@ -46,7 +46,7 @@ from addon.bake import spongecake as ms
 from addon.bake.exr import atomic_path
 from addon.reference import spongecake as reference
 from training import dataset
-from training.train import code_version, cosine_step, silu_mlp, to_mlp
+from training.train import code_version, cosine_step, ensemble, silu_mlp, to_mlp
 
 VERSION = 1
 DEFAULT_CACHE = dataset.DEFAULT_CACHE.parent / "spongecake-ms-energy"
@@ -264,45 +264,16 @@ def export(net, info: dict, samples: dict, data: dict, n_layers: int, out: Path,
     return manifest
 
 
-def averaged(nets: list) -> tuple[list, list]:
-    """Weights and biases of one MLP whose output is the mean of ``nets``' outputs (an ensemble; the same inputs,
-    depth and activation): their hidden units side by side, each member's layers in a block of their own, and the
-    last layer's weights stacked and divided by the count."""
-    weights = [np.concatenate([n.weights[0] for n in nets], axis=1)]
-    for i in range(1, len(nets[0].weights) - 1):
-        weights.append(_block_diagonal([n.weights[i] for n in nets]))
-    weights.append(np.concatenate([n.weights[-1] for n in nets], axis=0) / len(nets))
-    biases = [np.concatenate([n.biases[i] for n in nets]) for i in range(len(nets[0].biases) - 1)]
-    biases.append(np.mean([n.biases[-1] for n in nets], axis=0))
-    return weights, biases
-
-
-def _block_diagonal(blocks: list) -> np.ndarray:
-    out = np.zeros((sum(b.shape[0] for b in blocks), sum(b.shape[1] for b in blocks)))
-    r = c = 0
-    for b in blocks:
-        out[r:r + b.shape[0], c:c + b.shape[1]] = b
-        r, c = r + b.shape[0], c + b.shape[1]
-    return out
-
-
 MEMBER_KEYS = ("steps", "best_step", "training_seconds", "split_validation", "held_out_validation", "date",
-               "code_version")
+               "code_version")  # what differs between an ensemble's members: listed per member in its manifest
 
 
 def export_ensemble(folders: list, n_layers: int, out: Path, held_out: Path | None, log=print) -> dict:
     """The mean of the energy networks for ``n_layers`` in ``folders`` (trained with different ``--seed``s on the
     same data: their errors differ from run to run more than the held-out set resolves, and their mean varies
-    less), as one network (``averaged``) in ``out``, scored on the held-out set."""
+    less), as one network (``train.averaged``) in ``out``, scored on the held-out set."""
     name = ms.energy_weights_path(n_layers).name
-    nets = [mlp.load(Path(f) / name) for f in folders]
-    weights, biases = averaged(nets)
-    first = nets[0].manifest
-    manifest = {**{k: v for k, v in first.items() if k not in MEMBER_KEYS + ("held_out_per_config",)},
-                "hidden": [w.shape[1] for w in weights[:-1]], "ensemble_of": [
-                    {k: n.manifest.get(k) for k in MEMBER_KEYS} for n in nets],
-                "training_seconds": round(sum(n.manifest["training_seconds"] for n in nets), 1),
-                "date": datetime.date.today().isoformat(), "code_version": code_version()}
+    weights, biases, manifest = ensemble([mlp.load(Path(f) / name) for f in folders], MEMBER_KEYS)
     if held_out is not None and Path(held_out).exists():
         scores = validation.energy_errors(held_out, n_layers, mlp.MLP(tuple(weights), tuple(biases), manifest))
         manifest["held_out_validation"] = {k: v for k, v in scores.items() if k != "per_config"}
@@ -310,7 +281,7 @@ def export_ensemble(folders: list, n_layers: int, out: Path, held_out: Path | No
     path = Path(out) / name
     mlp.save(path, weights, biases, manifest)
     mlp.load.cache_clear()
-    log(f"wrote {path}: the mean of {len(nets)} networks: " + json.dumps(manifest.get("held_out_validation")))
+    log(f"wrote {path}: the mean of {len(folders)} networks: " + json.dumps(manifest.get("held_out_validation")))
     return manifest
 
 

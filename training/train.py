@@ -13,11 +13,12 @@ independently seeded validation set (tests/data) is scored at export and its err
 
     python -m training.train --data ~/.cache/lamina/spongecake-ms --layers 1 --threads 1 --minutes 30 --out addon/bake/weights
     python -m training.train --data /tmp/quick --quick --out /tmp/weights             # seconds, for tests
+    python -m training.train --layers 2 --ensemble <run of --seed 0> <run of --seed 1> --out <folder>
 
-``--area`` trains a candidate form, not the add-on's: the forward lobe scaled by the layers' projected areas along
+``--area`` trains the form with the area exponents: the forward lobe scaled by the layers' projected areas along
 wi and wo, each to a power the network predicts (``area_scale``; one output per layer after the others;
-docs/training.md measures the form's bound). The add-on refuses such weights (``addon.bake.spongecake.decode``), so
-their held-out scores are the training form's (``record_held_out``).
+docs/training.md measures the form's bound). Both shipped networks have it; ``addon.bake.spongecake.decode`` reads
+either form. ``--ensemble`` writes the mean of runs as one network (``export_ensemble``).
 """
 from __future__ import annotations
 
@@ -329,6 +330,64 @@ def record_held_out(path: Path, held_out: Path, training_form: bool = False) -> 
     return manifest
 
 
+def averaged(nets: list) -> tuple[list, list]:
+    """Weights and biases of one MLP whose output is the mean of ``nets``' outputs (an ensemble; the same inputs,
+    depth and activation): their hidden units side by side, each member's layers in a block of their own, and the
+    last layer's weights stacked and divided by the count."""
+    weights = [np.concatenate([n.weights[0] for n in nets], axis=1)]
+    for i in range(1, len(nets[0].weights) - 1):
+        weights.append(_block_diagonal([n.weights[i] for n in nets]))
+    weights.append(np.concatenate([n.weights[-1] for n in nets], axis=0) / len(nets))
+    biases = [np.concatenate([n.biases[i] for n in nets]) for i in range(len(nets[0].biases) - 1)]
+    biases.append(np.mean([n.biases[-1] for n in nets], axis=0))
+    return weights, biases
+
+
+def _block_diagonal(blocks: list) -> np.ndarray:
+    out = np.zeros((sum(b.shape[0] for b in blocks), sum(b.shape[1] for b in blocks)))
+    r = c = 0
+    for b in blocks:
+        out[r:r + b.shape[0], c:c + b.shape[1]] = b
+        r, c = r + b.shape[0], c + b.shape[1]
+    return out
+
+
+def ensemble(nets: list, member_keys: tuple) -> tuple[list, list, dict]:
+    """The weights, biases and manifest of the network whose output is the mean of ``nets``' (``averaged``): the
+    first member's manifest less what differs per member (``member_keys`` and the held-out details, listed per
+    member under ``ensemble_of``), with the members' summed training time. Members must share their outputs."""
+    if len({n.weights[-1].shape[1] for n in nets}) > 1:
+        raise ValueError("the members of an ensemble must have the same outputs (the same form), these have "
+                         + ", ".join(str(n.weights[-1].shape[1]) for n in nets))
+    weights, biases = averaged(nets)
+    per_member = ("held_out_per_config", "held_out_scored_by")
+    manifest = {**{k: v for k, v in nets[0].manifest.items() if k not in member_keys + per_member},
+                "hidden": [w.shape[1] for w in weights[:-1]],
+                "ensemble_of": [{k: n.manifest.get(k) for k in member_keys} for n in nets],
+                "training_seconds": round(sum(n.manifest.get("training_seconds", 0.0) for n in nets), 1),
+                "date": datetime.date.today().isoformat(), "code_version": code_version()}
+    return weights, biases, manifest
+
+
+MEMBER_KEYS = ("seed", "epochs", "steps", "best_step", "training_seconds", "split_validation", "held_out_validation",
+               "warm_started_from", "date", "code_version")  # what differs between an ensemble's members
+
+
+def export_ensemble(folders: list, n_layers: int, out: Path, held_out: Path | None, log=print) -> dict:
+    """The mean of the lobe networks for ``n_layers`` in ``folders`` (trained with different ``--seed``s on the
+    same data, split and form: runs differ more than the held-out set resolves, and their mean varies less) as one
+    network in ``out``, scored on the held-out set as the add-on runs it."""
+    name = ms.weights_path(n_layers).name
+    weights, biases, manifest = ensemble([mlp.load(Path(f) / name) for f in folders], MEMBER_KEYS)
+    path = Path(out) / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    mlp.save(path, weights, biases, manifest)
+    if held_out is not None and (Path(held_out) / f"layers{n_layers}").exists():
+        manifest = record_held_out(path, held_out)
+    log(f"wrote {path}: the mean of {len(folders)} networks: " + json.dumps(manifest.get("held_out_validation")))
+    return manifest
+
+
 def code_version() -> str:
     root = Path(__file__).resolve().parents[1]
     try:
@@ -392,6 +451,8 @@ def main(argv=None) -> int:
     ap.add_argument("--hidden", type=int, nargs="+", default=list(HIDDEN),
                     help="hidden layers' widths of a network trained from scratch (--init takes its network's)")
     ap.add_argument("--quick", action="store_true", help="a few seconds of training (tests)")
+    ap.add_argument("--ensemble", type=Path, nargs="+", metavar="FOLDER",
+                    help="write to --out the mean of the networks in these folders (``averaged``), scored, and stop")
     ap.add_argument("--rescore", action="store_true",
                     help="only re-score the weights in --out on --validation and record it in their manifests")
     ap.add_argument("--training-form", action="store_true",
@@ -400,6 +461,10 @@ def main(argv=None) -> int:
     torch.set_num_threads(a.threads)
     global DEVICE
     DEVICE = torch.device(a.device)
+    if a.ensemble:
+        for n_layers in a.layers:
+            export_ensemble(a.ensemble, n_layers, a.out, a.validation)
+        return 0
     if a.rescore:
         for n_layers in a.layers:
             if n_layers > ms.NETWORK_LAYERS:  # no network of its own: score the grouped prediction, record nothing

@@ -12,7 +12,7 @@ from addon.bake import layer_rows, mlp, validation  # noqa: E402
 from addon.bake import spongecake as ms  # noqa: E402
 from addon.models import spongecake as model  # noqa: E402
 from addon.reference import spongecake as ref  # noqa: E402
-from training import dataset, energy_train  # noqa: E402
+from training import dataset, energy_train, train  # noqa: E402
 
 
 def _rows(n_layers, n=32, seed=3):
@@ -131,11 +131,21 @@ def test_quick_energy_data_train_export_load(tmp_path, monkeypatch):
     for n_layers in (1, 2):
         m = ms.energy_network(n_layers).manifest
         assert m["layers"] == n_layers and m["training_configs"] > 0 and "held_out_validation" in m
+    other, mean = tmp_path / "seed1", tmp_path / "mean"  # another seed's run, and the mean of the two
+    assert energy_train.main(["--quick", "--data", str(data_dir), "--out", str(other), "--validation", str(held_out),
+                              "--workers", "1", "--threads", "1", "--layers", "1", "--seed", "1"]) == 0
+    assert energy_train.main(["--ensemble", str(weights), str(other), "--layers", "1", "--out", str(mean),
+                              "--validation", str(held_out)]) == 0
+    name = ms.energy_weights_path(1).name
+    members, averaged = [mlp.load(f / name) for f in (weights, other)], mlp.load(mean / name)
+    x = np.random.default_rng(0).normal(size=(16, members[0].n_inputs))
+    np.testing.assert_allclose(averaged(x), 0.5 * (members[0](x) + members[1](x)), rtol=1e-4, atol=1e-5)
+    assert len(averaged.manifest["ensemble_of"]) == 2 and "held_out_validation" in averaged.manifest
     mlp.load.cache_clear()
 
 
 def test_an_ensemble_is_one_network_whose_output_is_its_members_mean(tmp_path):
-    """``energy_train.averaged``: members of different widths side by side, through the shipped float32 format, give
+    """``train.averaged``: members of different widths side by side, through the shipped float32 format, give
     the mean of their raw outputs (and so a fraction between theirs)."""
     n_in = ms.energy_input_count(2, True)
     members = []
@@ -144,7 +154,7 @@ def test_an_ensemble_is_one_network_whose_output_is_its_members_mean(tmp_path):
         shapes = [(n_in, width), (width, width), (width, width), (width, 1)]
         members.append(mlp.MLP(tuple(rng.normal(0, 0.5, s) for s in shapes),
                                tuple(rng.normal(0, 0.5, s[1]) for s in shapes), {"activation": "silu"}))
-    weights, biases = energy_train.averaged(members)
+    weights, biases = train.averaged(members)
     mlp.save(tmp_path / "mean.npz", weights, biases, {"activation": "silu"})
     mean = mlp.load(tmp_path / "mean.npz")
     x = np.random.default_rng(3).normal(size=(64, n_in))

@@ -132,6 +132,16 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
     (net_a, info_a), (net_b, info_b) = (train.train(one, 1, 0.002, seed=s, log=lambda *a, **k: None) for s in (0, 1))
     assert np.array_equal(info_a["val_index"], info_b["val_index"]) and len(info_a["val_index"]) < len(one["rows"])
     assert not torch.equal(net_a[0].weight, net_b[0].weight)
+    ensemble = tmp_path / "ensemble"  # the mean of two runs of one form, as one network, scored
+    assert train.main(["--ensemble", str(weights), str(again), "--layers", "1", "--out", str(ensemble),
+                       "--validation", str(data_dir)]) == 0
+    members = [mlp.load(f / ms.weights_path(1).name) for f in (weights, again)]
+    mean = mlp.load(ensemble / ms.weights_path(1).name)
+    x = ms.features(dataset.load(data_dir, 1)["rows"])
+    np.testing.assert_allclose(mean(x), 0.5 * (members[0](x) + members[1](x)), rtol=1e-4, atol=1e-5)
+    assert np.abs(members[0](x) - members[1](x)).max() > 1e-3  # so the test can fail
+    assert [m["steps"] for m in mean.manifest["ensemble_of"]] == [m.manifest["steps"] for m in members]
+    assert "held_out_validation" in mean.manifest and mean.manifest["hidden"] == [2 * w for w in members[0].hidden]
     packed = tmp_path / "pack.npz"  # one compact file to train on another machine
     assert dataset.main(["--out", str(data_dir), "--pack", str(packed)]) == 0
     for n_layers in (1, 2):
@@ -150,6 +160,8 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
     assert manifest["area_exponents"] and manifest["outputs"] == train.outputs(1, area=True)
     assert len(manifest["held_out_per_config"]) == len(dataset.load(data_dir, 1)["rows"])
     assert manifest["held_out_scored_by"] == "add-on"
+    with pytest.raises(ValueError, match="same outputs"):
+        train.main(["--ensemble", str(weights), str(area), "--layers", "1", "--out", str(tmp_path / "mixed")])
     plain = mlp.load(weights / ms.weights_path(1).name).manifest
     assert not plain["area_exponents"] and plain["held_out_scored_by"] == "add-on"
     assert train.main(["--rescore", "--training-form", "--layers", "1", "--out", str(weights), "--validation",
