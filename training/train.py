@@ -268,7 +268,7 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
           log=print, area: bool = False, hidden: tuple = HIDDEN):
     """Train for ``minutes``, from ``make_network``'s start or, with ``init``, from an exported network
     (``warm_start``); returns the network at its best split-validation loss (checked every few seconds) and what
-    happened. ``area``: the candidate form with the area exponents (module docstring); ``hidden``: the hidden
+    happened. ``area``: the form with the area exponents (module docstring); ``hidden``: the hidden
     layers' widths (a warm start takes its network's). ``seed`` sets the start and the batches; the split into
     training and validation configurations is ``SPLIT_SEED``'s for every seed, so that runs compare on one split."""
     torch.manual_seed(seed)
