@@ -8,8 +8,9 @@ has (ground truths, networks, geometric terms). Speed: reference throughput, and
 
 Every model of the registry with a module here (``bench/<model id>.py``) contributes its sections through
 ``accuracy(sizes)`` and ``speed(sizes)`` (``Sizes``), in registry order; Fit to budget's section (``budget``), which
-spans every model, ends docs/benchmarks.md, and what more closures would buy the fitted mapping (``fit_ceiling``)
-ends docs/accuracy.md; docs/images/overview.png shows every model's presets.
+spans every model, and the texture bake's throughput (``bake_speed``) end docs/benchmarks.md, and what more closures
+would buy the fitted mapping (``fit_ceiling``) ends docs/accuracy.md; each of these three also runs alone
+(``python -m addon.bench.<module>``, ``splice_alone``); docs/images/overview.png shows every model's presets.
 """
 from __future__ import annotations
 
@@ -108,6 +109,18 @@ def splice(text: str, model_id: str, section: str, note: str) -> str:
     return text[:i] + body.lstrip("\n") + text[j + len(end) + 1:]
 
 
+def splice_alone(out_dir: str, page: str, section_id: str, section: str, command: str) -> None:
+    """``section``, measured alone by ``command``, in place of its marked section of ``out_dir``/``page``."""
+    from ..operators.compare_run import write_text_atomic
+
+    path = os.path.join(out_dir, page)
+    with open(path, encoding="utf-8") as f:
+        text = f.read()
+    note = f"*This section was measured alone (`{command}`, {datetime.date.today().isoformat()}).*"
+    write_text_atomic(path, splice(text, section_id, section, note))
+    print(f"lamina: wrote {path}")
+
+
 PARTS = ("accuracy", "speed")  # docs/accuracy.md, docs/benchmarks.md
 
 
@@ -116,7 +129,7 @@ def run(out_dir: str, sizes: Sizes = Sizes(), models: list[str] | None = None, p
     documents of ``parts`` are measured again and replaced in the existing documents (the overview picture is left as
     it is)."""
     from ..operators.compare_run import write_text_atomic
-    from . import budget, fit_ceiling  # not at the top: ``python -m addon.bench.<module>`` imports this package first
+    from . import bake_speed, budget, fit_ceiling  # not at the top: ``python -m addon.bench.<module>`` imports this package first
 
     os.makedirs(out_dir, exist_ok=True)
     if models is None:
@@ -131,6 +144,8 @@ def run(out_dir: str, sizes: Sizes = Sizes(), models: list[str] | None = None, p
             text = header + "".join(marked(b.MODEL, getattr(b, section)(sizes)) for b in benches)
             if section == "speed":  # Fit to budget chooses among every model's configurations
                 text += marked(budget.SECTION, budget.speed(sizes))
+                if sizes.ms is not None:
+                    text += marked(bake_speed.SECTION, bake_speed.speed(sizes.ms.bake_size))
             else:  # what more closures would buy the fitted mapping, over the models that have one
                 text += marked(fit_ceiling.SECTION, fit_ceiling.accuracy(sizes))
         else:

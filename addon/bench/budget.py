@@ -16,7 +16,6 @@ run with a new cost model renders only the configurations it newly chooses.
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 from dataclasses import replace
@@ -325,8 +324,7 @@ def main(argv=None) -> int:
     With ``--measurements FILE``, each material's measurements are saved there as they are made and kept from an
     earlier run: an interrupted run resumes, and a run after the cost model changed renders only what it newly
     chooses."""
-    from . import Sizes, splice
-    from ..operators.compare_run import write_text_atomic
+    from . import Sizes, splice_alone
 
     ap = argparse.ArgumentParser(prog="python -m addon.bench.budget", description=main.__doc__)
     ap.add_argument("--out", default="docs")
@@ -339,14 +337,8 @@ def main(argv=None) -> int:
     cands, seconds, rendered = tables(measurements(materials(), args.measurements, sizes, args.repeats))
     for form, m in least_squares(cands, seconds).items():
         print(f"lamina: {form}: {m}")
-    path = os.path.join(args.out, "benchmarks.md")
-    with open(path, encoding="utf-8") as f:
-        text = f.read()
-    note = (f"*This section was measured again alone (`python -m addon.bench.budget`, "
-            f"{datetime.date.today().isoformat()}); the rest of the page is from the run above.*")
     section = markdown(cands, seconds, rendered, sizes.timing_samples, sizes.timing_resolution, args.repeats)
-    write_text_atomic(path, splice(text, SECTION, section, note))
-    print(f"lamina: wrote {path}")
+    splice_alone(args.out, "benchmarks.md", SECTION, section, "python -m addon.bench.budget")
     return 0
 
 

@@ -9,8 +9,6 @@ hardly falls, the shapes of the closure dictionary, not the render-cost budget, 
 from __future__ import annotations
 
 import argparse
-import datetime
-import os
 
 from .. import presets
 from ..models import MODELS
@@ -66,20 +64,14 @@ def accuracy(sizes) -> str:
 
 def main(argv=None) -> int:
     """Measure this section alone and splice it into ``--out``/accuracy.md."""
-    from . import Sizes, splice
-    from ..operators.compare_run import write_text_atomic
+    from . import Sizes, splice_alone
 
     ap = argparse.ArgumentParser(prog="python -m addon.bench.fit_ceiling", description=main.__doc__)
     ap.add_argument("--out", default="docs")
     ap.add_argument("--resolution", type=int, default=48)
     args = ap.parse_args(argv)
-    path = os.path.join(args.out, "accuracy.md")
-    with open(path, encoding="utf-8") as f:
-        text = f.read()
-    note = (f"*This section was measured alone (`python -m addon.bench.fit_ceiling`, "
-            f"{datetime.date.today().isoformat()}).*")
-    write_text_atomic(path, splice(text, SECTION, accuracy(Sizes(resolution=args.resolution)), note))
-    print(f"lamina: wrote {path}")
+    splice_alone(args.out, "accuracy.md", SECTION, accuracy(Sizes(resolution=args.resolution)),
+                 "python -m addon.bench.fit_ceiling")
     return 0
 
 

@@ -1,8 +1,8 @@
 """SpongeCake's sections of the benchmark documents: named approximations, presets and reference vs ground truth,
 the sheen alternative, multiple scattering (``MsSizes``; ``bench --no-ms`` leaves it out: the networks against
 Monte Carlo on the held-out validation set and on the paper's failure case, a white furnace of non-absorbing
-stacks, rendered SS + MS vs Monte Carlo on presets (``reference.spongecake_truth``), render time with MS on vs off, the bake
-time per megapixel), reference throughput and Cycles render times against a Principled BSDF."""
+stacks, rendered SS + MS vs Monte Carlo on presets (``reference.spongecake_truth``), render time with MS on vs off; the bake
+time per megapixel is ``bake_speed``'s), reference throughput and Cycles render times against a Principled BSDF."""
 from __future__ import annotations
 
 import os
@@ -19,7 +19,7 @@ from ..reference import scenes as ref_scenes
 from ..reference import spongecake as reference
 from .common import (ACCURACY_SCENES, SAMPLING_FACTOR, approximation_header, approximation_rows, compared,
                      comparison_scenes, fitted_speed_section, mapping_errors, mapping_section, paired_render_times, pct,
-                     per_point_nodes, preset_render_times, ratio_cells, reference_throughput, timed)
+                     per_point_nodes, preset_render_times, ratio_cells, reference_throughput)
 
 MODEL = model.ID
 
@@ -444,36 +444,6 @@ def rendered_ms_errors(name: str, sizes: MsSizes, samples: int, resolution: int)
     return out
 
 
-def bake_throughput(size: int) -> tuple[str, float]:
-    """(what was timed, seconds per megapixel): ``bake.textures.bake_maps`` on a synthetic size × size input
-    (2-layer fabric, textures on the top layer's albedo and roughness and the bottom layer's thickness) when
-    that module exists, else the core inference ``predict_rows`` on size² texels."""
-    from ..bake import layer_rows
-    from ..bake import spongecake as ms
-
-    p = model.params_from_dict({**presets.load(MODEL, "fabric"), "multiple_scattering": True})
-    rng = np.random.default_rng(0)
-    ms.network(len(p.layers))  # load once, outside the timing
-    try:
-        from ..bake import textures
-    except ImportError:
-        textures = None
-    if textures is not None:
-        inputs = {(0, "albedo"): rng.uniform(0.2, 0.9, (size, size, 3)),
-                  (0, "roughness"): rng.uniform(0.05, 0.5, (size, size)),
-                  (1, "thickness"): rng.uniform(1.0, 8.0, (size, size))}
-        seconds = min(timed(lambda: textures.bake_maps(p, inputs)) for _ in range(2))
-        what = (f"`bake.textures.bake_maps`, 2-layer fabric, synthetic {size}×{size} textures on three inputs, "
-                "network inference and packing into RGBA maps, no file I/O")
-    else:
-        rows = np.repeat(layer_rows.stack_rows(p)[None], size * size, axis=0)
-        rows[:, :, layer_rows.ROUGHNESS] *= rng.uniform(0.5, 1.0, (size * size, 1))  # texels differ
-        seconds = min(timed(lambda: ms.predict_rows(rows)) for _ in range(2))
-        what = (f"core inference `bake.spongecake.predict_rows` (network + decode), 2-layer fabric, {size}×{size} "
-                "texels (`bake.textures` not available)")
-    return what, seconds / (size * size / 1e6)
-
-
 def ms_render_times(names, samples: int, resolution: int, repeats: int) -> list[dict]:
     """Cycles render time of each preset with and without multiple scattering, both forms, on the sphere scene
     (``paired_render_times``: at ``samples`` and at ``SAMPLING_FACTOR`` times as many, in ``repeats`` rounds). Per
@@ -776,7 +746,6 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
 
 def ms_speed_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
     rows = ms_render_times(sizes.presets, samples, resolution, sizes.speed_repeats)
-    what, per_mp = bake_throughput(sizes.bake_size)
     lines = ["", "## Multiple scattering", "",
              f"Cycles CPU render of the sphere scene, {resolution}×{resolution} px, the same material with multiple "
              f"scattering off and on, renders alternating, fastest of {sizes.speed_repeats}; the ratio of the fastest "
@@ -799,7 +768,6 @@ def ms_speed_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "| preset | node group SS | SS + MS | ratio |", "|---|---|---|---|"]
     lines += [f"| {r['preset']} | {r['per_point_nodes'][0]} | {r['per_point_nodes'][1]} | "
               f"{r['per_point_nodes'][1] / r['per_point_nodes'][0]:.2f} |" for r in rows]
-    lines += ["", f"Baking multiple scattering into textures: **{per_mp:.2f} s per megapixel** ({what}; fastest of 2)."]
     return "\n".join(lines) + "\n"
 
 

@@ -68,7 +68,6 @@ def test_the_speed_page_shows_both_tables(monkeypatch):
                    "sampling": 2.5, "sampling_ratio": float("nan"), "sampling_rounds": []}}
     row["per_point_nodes"] = (120, 150)
     monkeypatch.setattr(bench, "ms_render_times", lambda *a: [row])
-    monkeypatch.setattr(bench, "bake_throughput", lambda size: ("fake", 1.0))
     page = bench.ms_speed_markdown(bench.MsSizes(), 64, 192)
     assert "| fabric | 2.00 | 3.00 | 1.50 | 1.40–1.60 | 4.00 | 5.00 | 1.25 | 1.20–1.30 |" in page
     assert "| fabric | 120 | 150 | 1.25 |" in page

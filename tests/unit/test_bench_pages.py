@@ -45,3 +45,29 @@ def test_the_closure_budget_section_lists_only_presets_whose_fit_misses_a_goal(m
     assert rows == [f"| spongecake | sheen | {n} | {2 + n} | {40 - 10 * n:.1f}% | 5.0% | 30.0% | n/a | 1.0% |"
                     for n in fit_ceiling.SPARE]
     assert fit_ceiling.misses_a_goal(missed, means) and not fit_ceiling.misses_a_goal(fine, means)
+
+
+def test_a_section_measured_alone_replaces_only_itself(tmp_path):
+    """``splice_alone`` (``python -m addon.bench.budget``, ``fit_ceiling``, ``bake_speed``) rewrites its own section of
+    an existing page and says it was measured alone."""
+    page = "# Benchmarks\n" + bench.marked("a", "old a") + bench.marked("b", "old b")
+    (tmp_path / "benchmarks.md").write_text(page, encoding="utf-8")
+    bench.splice_alone(str(tmp_path), "benchmarks.md", "b", "new b", "python -m x")
+    new = (tmp_path / "benchmarks.md").read_text(encoding="utf-8")
+    assert "old a" in new and "new b" in new and "old b" not in new
+    assert "measured alone (`python -m x`" in new
+
+
+def test_the_bake_speed_section_names_the_network_it_timed(tmp_path, monkeypatch):
+    """The bake's throughput depends on the network's width, so its section says which network ran; measured alone
+    it lands in its own section of the page, after the others."""
+    from addon.bake import spongecake as ms
+    from addon.bench import bake_speed
+
+    widths = " × ".join(str(w) for w in ms.network(2).hidden)
+    section = bake_speed.speed(4)  # a real bake of 4×4 texels
+    assert f"hidden {widths}" in section and "s per megapixel**" in section
+    (tmp_path / "benchmarks.md").write_text("# Benchmarks\n" + bench.marked("spongecake", "renders"), encoding="utf-8")
+    assert bake_speed.main(["--out", str(tmp_path), "--size", "4"]) == 0
+    page = (tmp_path / "benchmarks.md").read_text(encoding="utf-8")
+    assert page.index("renders") < page.index("<!-- lamina-bench bake-speed -->") < page.index("s per megapixel")
