@@ -362,7 +362,7 @@ def ensemble(nets: list, member_keys: tuple) -> tuple[list, list, dict]:
     weights, biases = averaged(nets)
     per_member = ("held_out_per_config", "held_out_scored_by")
     manifest = {**{k: v for k, v in nets[0].manifest.items() if k not in member_keys + per_member},
-                "hidden": [w.shape[1] for w in weights[:-1]],
+                "hidden": list(mlp.hidden_widths(weights)),
                 "ensemble_of": [{k: n.manifest.get(k) for k in member_keys} for n in nets],
                 "training_seconds": round(sum(n.manifest.get("training_seconds", 0.0) for n in nets), 1),
                 "date": datetime.date.today().isoformat(), "code_version": code_version()}

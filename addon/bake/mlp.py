@@ -22,6 +22,11 @@ def silu(x):
 ACTIVATIONS = {"silu": silu, "tanh": np.tanh}
 
 
+def hidden_widths(weights) -> tuple:
+    """The hidden layers' widths of a network with these weights."""
+    return tuple(w.shape[1] for w in weights[:-1])
+
+
 @dataclass(frozen=True)
 class MLP:
     weights: tuple
@@ -34,8 +39,7 @@ class MLP:
 
     @property
     def hidden(self) -> tuple:
-        """The hidden layers' widths."""
-        return tuple(w.shape[1] for w in self.weights[:-1])
+        return hidden_widths(self.weights)
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         activation = ACTIVATIONS[self.manifest.get("activation", "silu")]
