@@ -37,13 +37,14 @@ def test_numpy_inference_matches_torch_through_the_shipped_float32_format(n_laye
     exported = train.to_mlp(net, {})
     mlp.save(tmp_path / "w.npz", exported.weights, exported.biases, {"layers": n_layers})
     loaded = mlp.load(tmp_path / "w.npz")
-    net32 = train.make_network(n_layers)
-    net32.load_state_dict({k: v.float().double() for k, v in net.state_dict().items()})  # the float32 weights
+    net32 = train.make_network(n_layers).float()  # torch's float32 inference, as the network was trained
+    net32.load_state_dict({k: v.float() for k, v in net.state_dict().items()})
     with torch.no_grad():
-        lobe_t, w_t = ms.decode(net32(torch.as_tensor(ms.features(rows))), torch.as_tensor(rows), train.TorchOps)
+        raw = net32(torch.as_tensor(ms.features(rows), dtype=torch.float32)).double()
+        lobe_t, w_t = ms.decode(raw, torch.as_tensor(rows), train.TorchOps)
     lobe_n, w_n = ms.decode(loaded(ms.features(rows)), rows)
-    np.testing.assert_allclose(lobe_n, lobe_t.numpy(), rtol=1e-5, atol=1e-12)
-    np.testing.assert_allclose(w_n, w_t.numpy(), rtol=1e-5, atol=1e-12)
+    np.testing.assert_allclose(lobe_n, lobe_t.numpy(), rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(w_n, w_t.numpy(), rtol=1e-5, atol=1e-7)
     assert np.ptp(lobe_n[:, :, layer_rows.ROUGHNESS]) > 0.1  # the outputs really vary
 
 
@@ -364,14 +365,14 @@ def test_a_warm_start_goes_on_from_the_exported_network(n_layers):
     train.warm_start(net, exported)
     with torch.no_grad():
         raw = net(torch.as_tensor(x)).numpy()
-    np.testing.assert_allclose(raw[:, :exported.weights[-1].shape[1]], exported(x), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(raw[:, :exported.weights[-1].shape[1]], exported(x), rtol=1e-5, atol=1e-6)  # float32
     if n_layers == 2:
         assert (ms.decode(raw, rows)[1][:, ms.FORWARD_ALBEDO] < 0.02).all()
     with_area = train.make_network(n_layers, area=True)  # --area from weights without the exponents
     train.warm_start(with_area, exported)
     with torch.no_grad():
         raw_area = with_area(torch.as_tensor(x)).numpy()
-    np.testing.assert_allclose(raw_area[:, :exported.weights[-1].shape[1]], exported(x), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(raw_area[:, :exported.weights[-1].shape[1]], exported(x), rtol=1e-5, atol=1e-6)
     exponents = np.log1p(np.exp(raw_area[:, train.outputs(n_layers):]))
     assert exponents.shape[1] == n_layers and exponents.max() < 1e-2  # areas to about the power 0: the lobe as it was
     with pytest.raises(ValueError, match="neither"):
