@@ -129,7 +129,8 @@ def run(out_dir: str, sizes: Sizes = Sizes(), models: list[str] | None = None, p
     documents of ``parts`` are measured again and replaced in the existing documents (the overview picture is left as
     it is)."""
     from ..operators.compare_run import write_text_atomic
-    from . import bake_speed, budget, fit_ceiling  # not at the top: ``python -m addon.bench.<module>`` imports this package first
+    # not at the top: ``python -m addon.bench.<module>`` imports this package first
+    from . import bake_speed, budget, fit_ceiling
 
     os.makedirs(out_dir, exist_ok=True)
     if models is None:
