@@ -58,7 +58,7 @@ def test_a_section_measured_alone_replaces_only_itself(tmp_path):
     assert "measured alone (`python -m x`" in new
 
 
-def test_the_bake_speed_section_names_the_network_it_timed(tmp_path, monkeypatch):
+def test_the_bake_speed_section_names_the_network_it_timed(tmp_path):
     """The bake's throughput depends on the network's width, so its section says which network ran; measured alone
     it lands in its own section of the page, after the others."""
     from addon.bake import spongecake as ms
