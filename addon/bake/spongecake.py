@@ -71,7 +71,7 @@ ALPHA_RANGE = (0.01, 1.0)
 G_MAX = 0.95
 THICKNESS_IN = (0.01, 10.0)
 THICKNESS_OUT = (0.01, 20.0)
-MS_VERSION = 12  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
+MS_VERSION = 13  # what a bake holds: 2 adds the energy scale (the ``MS Energy`` inputs), 3 its margin, 4 an oriented
 # stack's scale over the view's azimuth too (``nodes.spongecake.view_inputs``), 5 the energy budget (``energy_budget``),
 # 6 its view tables made safe along the view cosine too (``budget_rows``), 7 the forward lobe (``decode``), 8 each
 # form's budget on its own prediction (the node group's merged fiber lobes: ``nodes.spongecake._FiberLobes``), 9 one
@@ -79,8 +79,10 @@ MS_VERSION = 12  # what a bake holds: 2 adds the energy scale (the ``MS Energy``
 # fraction's network for stacks of 1 or 2 layers without a substrate (``energy_fraction``), with budget tables
 # that follow a texture-driven input (``driven_budget_rows``), 11 the forward lobe scaled by the layers' projected
 # areas (``AREA``; the Cycles forms' along the normal: ``cycles_weights``), 12 the reference's energy table on twice
-# the knots (``models.spongecake.ENERGY_KNOTS``: what fits with multiple scattering match)
-NETWORK_LAYERS = 2  # networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
+# the knots (``models.spongecake.ENERGY_KNOTS``: what fits with multiple scattering match), 13 the energy fraction for
+# stacks of 3 and 4 layers too (``takes_fraction``)
+NETWORK_LAYERS = 2  # lobe networks are trained for 1 and 2 layers; more go through the two-layer one, grouped
+ENERGY_NETWORK_LAYERS = model.MAX_LAYERS  # an energy fraction network per layer count, each on its own data
 
 
 def weights_path(n_layers: int) -> Path:
@@ -104,10 +106,11 @@ def energy_weights_path(n_layers: int) -> Path:
 
 
 def energy_network(n_layers: int) -> mlp.MLP:
-    """The network that predicts the energy fraction (``energy_fraction``) of stacks of ``n_layers`` (1 or 2; deeper
-    stacks keep the lobes' own energy: ``energy_grid``)."""
-    if not 1 <= n_layers <= NETWORK_LAYERS:
-        raise ValueError(f"energy fraction networks are trained for 1 to {NETWORK_LAYERS} layers, got {n_layers}")
+    """The network that predicts the energy fraction (``energy_fraction``) of stacks of ``n_layers`` (1 to
+    ``ENERGY_NETWORK_LAYERS``)."""
+    if not 1 <= n_layers <= ENERGY_NETWORK_LAYERS:
+        raise ValueError(f"energy fraction networks are trained for 1 to {ENERGY_NETWORK_LAYERS} layers, "
+                         f"got {n_layers}")
     return mlp.load(energy_weights_path(n_layers))
 
 
@@ -115,8 +118,7 @@ def ms_identity(n_layers: int) -> list:
     """What a stack's multiple scattering comes from: the manifests of the networks that predict it (lobes and
     energy fraction) and the version of what is made from the prediction (``MS_VERSION``, e.g. the energy scale);
     part of bake keys and fit keys."""
-    fraction = [energy_network(n_layers).manifest] if n_layers <= NETWORK_LAYERS else []
-    return [network(n_layers).manifest, *fraction, MS_VERSION]
+    return [network(n_layers).manifest, energy_network(n_layers).manifest, MS_VERSION]
 
 
 # ------------------------------------------------------------------------------------------- encoding
@@ -400,7 +402,7 @@ def energy_input_count(n_layers: int, view: bool) -> int:
 
 
 def energy_inputs(rows: np.ndarray, w: np.ndarray, view: bool = True) -> np.ndarray:
-    """(N, 3, ``energy_input_count``) inputs of the energy network for stacks (N, L ≤ 2, ROW) seen along w (N, 3)
+    """(N, 3, ``energy_input_count``) inputs of the energy network for stacks (N, L, ROW) seen along w (N, 3)
     from above, per channel: per layer ``features`` of the channel's rows, √(1 − albedo) and √(1 − f0) (multiply
     scattered light falls like √(1 − albedo) near white: similarity theory), log(albedo f0) / |log floor| (each
     bounce multiplies by about albedo f0, so the share left after a few is a power of it), then w in the stack's
@@ -441,7 +443,7 @@ def view_features(rows: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 
 def fraction_rows(rows: np.ndarray, w: np.ndarray, net: mlp.MLP | None = None) -> np.ndarray:
-    """The energy fraction (N, 3) of stacks (N, L ≤ 2, ROW) seen along w (N, 3) from above: the share of what single
+    """The energy fraction (N, 3) of stacks (N, L, ROW) seen along w (N, 3) from above: the share of what single
     scattering and the Dirac leave that multiple scattering returns (``energy_fraction``); the shipped network for L
     layers, or ``net`` (with ``view_features`` where its inputs count them)."""
     rows = np.asarray(rows, dtype=np.float64)
@@ -648,11 +650,10 @@ def energy_grid(params: model.Params, left_of, lobes_of, mu, phi, side: float = 
 
 
 def takes_fraction(params: model.Params) -> bool:
-    """Whether the energy scale follows the energy fraction network: stacks of 1 or 2 layers without a substrate.
-    For 3 and 4 layers neither networks trained on them (4000 stacks each) nor the two-layer network on the stack
-    lumped in two were better than the lobes' own energy on both held-out sets (docs/training.md, *Stacks of 3 and
-    4 layers*); over a substrate it has no data."""
-    return params.substrate is None and len(params.layers) <= NETWORK_LAYERS
+    """Whether the energy scale follows the energy fraction network: stacks without a substrate (over one it has no
+    data). Stacks of 3 and 4 layers take it since networks of their own were trained on 15000 stacks each
+    (docs/training.md, *Stacks of 3 and 4 layers*)."""
+    return params.substrate is None
 
 
 # A white stack's energy fraction is 1 (what single scattering leaves, multiple scattering returns); within the

@@ -586,7 +586,7 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               f"({sizes.returned_light_paths} paths per view; `validation.returned_light`), the energy itself, and "
               "that walk's own noise (the same measure, estimated from its two halves). "
               "Stacks of 3 and 4 layers go through the two-layer network, grouped (docs/training.md); their energy "
-              "scale keeps the lobes' own energy (no energy fraction).",
+              "scale follows energy fraction networks of their own, as for 1 and 2 layers.",
               ""]
     if val:
         lines += ["| layers | energy scale | configs | pairs × paths | mean | median | worst | mean energy error | "
@@ -611,8 +611,8 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               "walk's noise too). The model: the same measure of the reference's "
               "multiple scattering at each wi (the network's lobes' albedo there times the energy scale at that "
               "view, `validation.model_energy_errors`), with the energy fraction and without it (the lobes' own "
-              "energy, at most what single scattering leaves: what stacks of 3 and 4 layers render, and 1 and 2 layers "
-              "before MS_VERSION 10). Mean / median / worst.", ""]
+              "energy, at most what single scattering leaves: what stacks of 1 and 2 layers rendered before MS_VERSION "
+              "10, and of 3 and 4 layers before 13). Mean / median / worst.", ""]
     if os.path.exists(sizes.energy_validation):
         lines += ["| layers | stacks | network: mean energy error | median | worst | per view | the model with the "
                   "fraction | the model without it |", "|---|---|---|---|---|---|---|---|"]
@@ -622,9 +622,6 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
 
         for n in range(1, model.MAX_LAYERS + 1):
             without = validation.model_energy_errors(sizes.energy_validation, n, fraction=False)
-            if n > NETWORK_LAYERS:  # no fraction network (docs/training.md): the lobes' own energy
-                lines.append(f"| {n} | {without['configs']} | none | | | | not used | {triple(without)} |")
-                continue
             v = validation.energy_errors(sizes.energy_validation, n)
             with_fraction = validation.model_energy_errors(sizes.energy_validation, n)
             lines.append(f"| {n} | {v['configs']} | {pct(v['mean_relative_energy_error'])} | "

@@ -29,7 +29,7 @@ def quick_weights(tmp_path, monkeypatch):
     assert dataset.main(["--quick", "--out", str(data), "--workers", "1"]) == 0
     assert train.main(["--quick", "--layers", "1", "--data", str(data), "--out", str(weights),
                        "--validation", str(data), "--threads", "1"]) == 0
-    for n_layers in (1, 2):  # the energy fraction networks are trained apart (training.energy_train)
+    for n_layers in range(1, ms.ENERGY_NETWORK_LAYERS + 1):  # trained apart (training.energy_train)
         shutil.copy(ms.energy_weights_path(n_layers), weights)
     monkeypatch.setattr(ms, "WEIGHTS", weights)
     mlp.load.cache_clear()

@@ -102,7 +102,7 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
     assert all(json.loads(str(np.load(s)["meta"]))["seconds"] >= 0 for s in shards)
     assert train.main(["--quick", "--data", str(data_dir), "--out", str(weights), "--validation", str(data_dir),
                        "--threads", "1"]) == 0
-    for n_layers in (1, 2):  # the energy fraction networks are trained apart (test_ms_energy_network.py)
+    for n_layers in range(1, ms.ENERGY_NETWORK_LAYERS + 1):  # trained apart (test_ms_energy_network.py)
         shutil.copy(ms.energy_weights_path(n_layers), weights)
     monkeypatch.setattr(ms, "WEIGHTS", weights)
     mlp.load.cache_clear()
