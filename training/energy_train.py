@@ -217,10 +217,11 @@ def train(samples: dict, n_layers: int, minutes: float, seed: int = 0, log=print
     left = torch.as_tensor(samples["left"], dtype=torch.float32)
     energy = torch.as_tensor(samples["energy"], dtype=torch.float32)
     per_config = np.bincount(samples["config"], weights=samples["energy"]) / np.bincount(samples["config"])
-    norm = torch.as_tensor(per_config[samples["config"]] + ENERGY_FLOOR, dtype=torch.float32)
+    norm_of_sample = per_config[samples["config"]] + ENERGY_FLOOR
+    norm = torch.as_tensor(norm_of_sample, dtype=torch.float32)
     train_idx = torch.as_tensor(np.flatnonzero(~is_val))
     val_samples = {k: samples[k][is_val] for k in ("left", "energy", "config")}
-    net = make_network(x.shape[1], best_constant_share(samples, norm.numpy().astype(np.float64)))
+    net = make_network(x.shape[1], best_constant_share(samples, norm_of_sample))
     opt = torch.optim.Adam(net.parameters(), lr=LEARNING_RATE)
     start, step, last_check = time.time(), 0, -math.inf
     best = (math.inf, None, 0)
