@@ -17,7 +17,8 @@ API
 ``eval_stack(layers, wi, wo) -> (B, N, 3)``
     f(wi, wo) without cosine and without the Dirac of delta transmission, for ``layers`` a list of
     LayerBatch, top layer first (1 or more layers, all with the same B). ``wi`` (light) and ``wo`` (viewer)
-    are unit directions in the local frame (z = macro normal), (B, N, 3) or (N, 3) (broadcast over B).
+    are unit directions in the local frame (z = macro normal), (B, N, 3) or (N, 3) (broadcast over B); float64
+    unless ``wi`` is a tensor of another float type (training in float32).
     Reflection and transmission, light from either side: layer k's lobe is attenuated along each direction by
     the layers between it and the side the direction points to. Zero when a direction is exactly grazing,
     and the flake lobes vanish where wo = -wi exactly (no half vector), as in the reference.
@@ -186,7 +187,8 @@ def eval_stack(layers: list[LayerBatch], wi, wo):
     if not layers:
         raise ValueError("eval_stack: needs at least one layer")
     batch = len(layers[0])
-    wi, wo = torch.broadcast_tensors(torch.as_tensor(wi, dtype=DTYPE), torch.as_tensor(wo, dtype=DTYPE))
+    dtype = wi.dtype if torch.is_tensor(wi) and wi.is_floating_point() else DTYPE
+    wi, wo = torch.broadcast_tensors(torch.as_tensor(wi, dtype=dtype), torch.as_tensor(wo, dtype=dtype))
     if wi.dim() == 2:
         wi, wo = wi.expand(batch, -1, -1), wo.expand(batch, -1, -1)
     ci, co = wi[..., 2], wo[..., 2]
@@ -198,7 +200,7 @@ def eval_stack(layers: list[LayerBatch], wi, wo):
 
     h = wi + wo
     valid = torch.any(h != 0, dim=-1)
-    h = torch.where(valid.unsqueeze(-1), h, torch.tensor([0.0, 0.0, 1.0], dtype=DTYPE, device=h.device))
+    h = torch.where(valid.unsqueeze(-1), h, torch.tensor([0.0, 0.0, 1.0], dtype=dtype, device=h.device))
     h = h / torch.sqrt(_dot(h, h)).unsqueeze(-1)
 
     ls = [_Layer(layer) for layer in layers]

@@ -168,6 +168,14 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
     assert train.main(["--rescore", "--training-form", "--layers", "1", "--out", str(weights), "--validation",
                        str(data_dir)]) == 0  # the same measure for both, to compare them
     assert mlp.load(weights / ms.weights_path(1).name).manifest["held_out_scored_by"] == "training form"
+    fast = tmp_path / "fast"  # float32, some wi per step, another floor: recorded in the manifest
+    monkeypatch.setattr(train, "PRECISION", train.PRECISION)  # main sets it for the process
+    assert train.main(["--quick", "--data", str(data_dir), "--out", str(fast), "--validation", str(data_dir),
+                       "--threads", "1", "--layers", "2", "--float32", "--wi-per-step", "2",
+                       "--energy-floor", "1e-4"]) == 0
+    manifest = mlp.load(fast / ms.weights_path(2).name).manifest
+    assert (manifest["precision"], manifest["wi_per_step"], manifest["energy_floor"]) == ("float32", 2, 1e-4)
+    assert np.isfinite(manifest["held_out_validation"]["mean_relative_lobe_error"])
     mlp.load.cache_clear()
     ms.predict.cache_clear()
 
@@ -325,6 +333,49 @@ def test_training_augmentations_are_exact_symmetries_of_the_model():
     augmented = train.augment(batch, np.random.default_rng(7))
     assert not np.allclose(augmented["wi"], batch["wi"])
     np.testing.assert_allclose(single(augmented), augmented["ms"], rtol=1e-9, atol=1e-12)
+
+
+def test_training_in_float32_computes_the_float64_loss(monkeypatch):
+    rng = np.random.default_rng(6)
+    n = 8
+    data = {"rows": _rows(2, n), "wi": np.stack([dataset.stratified_hemisphere(rng, 4) for _ in range(n)]),
+            "wo": np.stack([dataset.stratified_sphere(rng, 18) for _ in range(n)]),
+            "ms": rng.gamma(0.5, 0.01, (n, 4, 18, 3))}
+    net = _random_network(2, area=True)
+    losses = {}
+    for precision in (torch.float64, torch.float32):
+        monkeypatch.setattr(train, "PRECISION", precision)
+        with torch.no_grad():
+            loss = train.lobe_loss(net.to(precision), data, np.arange(n))
+        assert loss.dtype == precision
+        losses[precision] = loss.item()
+    assert losses[torch.float32] == pytest.approx(losses[torch.float64], rel=1e-4)
+
+
+def test_training_on_some_wi_per_step_estimates_the_whole_loss_without_bias():
+    """Every wi's terms of the loss are means over its own pairs, so the loss over k of n wi, averaged over the
+    subsets, is the loss over all n (``--wi-per-step``: more steps for the same time); the draw keeps each wi
+    with its lobes."""
+    rng = np.random.default_rng(5)
+    n, n_wi, n_wo = 6, 4, 8
+    batch = {"rows": _rows(2, n), "wi": np.stack([dataset.stratified_hemisphere(rng, n_wi) for _ in range(n)]),
+             "wo": np.stack([dataset.stratified_sphere(rng, n_wo) for _ in range(n)]),
+             "ms": rng.gamma(0.5, 0.01, (n, n_wi, n_wo, 3))}
+    net = _random_network(2, area=True)
+    norm = torch.as_tensor(rng.uniform(0.5, 2.0, n))
+    subsets = [(a, b) for a in range(n_wi) for b in range(a + 1, n_wi)]
+    with torch.no_grad():
+        whole = train.batch_loss(net, batch, norm).item()
+        parts = [train.batch_loss(net, {**batch, "wi": batch["wi"][:, list(s)], "ms": batch["ms"][:, list(s)]},
+                                  norm).item() for s in subsets]
+    assert np.std(parts) > 0.01 * whole
+    assert np.mean(parts) == pytest.approx(whole, rel=1e-12)
+
+    drawn = train.some_wi(batch, 3, np.random.default_rng(1))
+    for c in range(n):
+        picked = [int(np.flatnonzero(np.all(batch["wi"][c] == w, axis=1))[0]) for w in drawn["wi"][c]]
+        assert len(set(picked)) == 3
+        np.testing.assert_array_equal(drawn["ms"][c], batch["ms"][c, picked])
 
 
 @pytest.mark.parametrize("n_layers", [1, 2])
