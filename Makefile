@@ -76,13 +76,16 @@ bench: venv
 dataset: venv
 	$(PY) -m training.dataset --out $(DATA)
 
-# The two networks side by side, one core and TRAIN_MINUTES each (how the shipped ones were trained).
-TRAIN_MINUTES ?= 30
+# The two networks side by side, one core each, in the forms and for the times of the shipped ones (their manifests
+# say what they saw: the two-layer one 6825 configurations of the shards `training.dataset --layers 2 --configs 12000`
+# makes; docs/training.md).
+TRAIN_1 ?= --area --minutes 30
+TRAIN_2 ?= --area --hidden 192 192 192 --float32 --wi-per-step 4 --minutes 65
 train: venv
 	$(MAKE) --no-print-directory -j2 train-1 train-2
 
 train-1 train-2: venv
-	$(PY) -m training.train --data $(DATA) --layers $(subst train-,,$@) --threads 1 --minutes $(TRAIN_MINUTES) --out addon/bake/weights
+	$(PY) -m training.train --data $(DATA) --layers $(subst train-,,$@) --threads 1 $(TRAIN_$(subst train-,,$@)) --out addon/bake/weights
 
 # The energy-fraction networks (the share of what single scattering leaves that multiple scattering returns) for
 # 1 to 4 layers: the random walk's tallies first (resumable; 54200 stacks, 17476 worker seconds in the shipped

@@ -21,7 +21,7 @@ from addon.reference import spongecake as ref
 from addon.reference.frames import spherical
 
 WHITE = {
-    "flakes over a medium (glows 1.5x unscaled)": [
+    "flakes over a medium (glows unscaled)": [
         {"type": "surface", "roughness": 0.02, "thickness": 0.5, "albedo": [1, 1, 1]},
         {"type": "hg", "roughness": 0.5, "thickness": 2.0, "albedo": [1, 1, 1]}],
     "fibers along the normal": [
@@ -73,11 +73,11 @@ def test_white_isotropic_stacks_return_what_they_receive(name):
 
 def test_the_scale_is_what_makes_it_so():
     """Without the scale the first white stack glows (the network's energy alone), so the test above can fail."""
-    p = _params({"layers": WHITE["flakes over a medium (glows 1.5x unscaled)"]})
+    p = _params({"layers": WHITE["flakes over a medium (glows unscaled)"]})
     wo = _views(6, 2)
     unscaled = ref.furnace_albedo(model.white(p), wo) + np.concatenate(
         [ref.network_albedo(p, bake.predict(p), wo[:6]), ref.network_albedo(p, bake.predict(p), wo[6:])])
-    assert unscaled.max() > 1.3
+    assert unscaled.max() > 1.2  # 1.28 with the two-layer network of 2026-12-06 (1.5 with earlier ones)
 
 
 @pytest.mark.parametrize("name", list(OTHERS))
@@ -103,7 +103,7 @@ def _form_furnace(p, form, wo):
 
 
 @pytest.mark.parametrize("form", ["osl", "nodes"])
-@pytest.mark.parametrize("name", ["flakes over a medium (glows 1.5x unscaled)", "four layers"])
+@pytest.mark.parametrize("name", ["flakes over a medium (glows unscaled)", "four layers"])
 def test_cycles_forms_white_furnace_is_one(form, name):
     """In the forms the scale is built on what the form's own single scattering leaves, so the rendered white
     furnace is 1 whatever the single-scattering mapping's error (views above: the forms' MS is light from above)."""
