@@ -197,17 +197,16 @@ def lobe_loss(net, data: dict, index, rng=None, wi_per_step: int | None = None,
               floor: float = ENERGY_FLOOR) -> torch.Tensor:
     """MAE of f |cos wo| per configuration, plus ENERGY_WEIGHT times the MAE of the energy each wi sends back and
     through (f |cos wo| averaged over the wo of each hemisphere), both relative to that configuration's mean
-    multiple scattering (over all its pairs) plus ``floor``. The energy term is there because an MAE fit of the lobe alone is the
-    median, which ignores the narrow peaks of low-roughness flakes' multiple scattering (a few very large
-    Monte Carlo values) and so under-predicts their energy; the error that matters is relative to each lobe,
-    and the floor keeps configurations whose multiple scattering is negligible (mostly Monte Carlo noise) from
-    dominating.
+    multiple scattering (over all its pairs) plus ``floor``. The energy term is there because an MAE fit of the
+    lobe alone is the median, which ignores the narrow peaks of low-roughness flakes' multiple scattering (a few
+    very large Monte Carlo values) and so under-predicts their energy; the error that matters is relative to each
+    lobe, and the floor keeps configurations whose multiple scattering is negligible (mostly Monte Carlo noise)
+    from dominating.
     With ``rng``, the batch is augmented by the model's exact symmetries (``augment``) and, with ``wi_per_step``,
     each configuration keeps that many of its wi, drawn at random (``some_wi``): an unbiased estimate of the loss
     at a fraction of the cost, every wi's energy term still exact."""
     batch = {k: data[k][index] for k in ("rows", "wi", "wo", "ms")}
-    norm = torch.as_tensor((batch["ms"] * np.abs(batch["wo"][:, None, :, 2:])).mean(axis=(1, 2, 3)) + floor,
-                           dtype=PRECISION, device=DEVICE)
+    norm = target(batch).mean(dim=(1, 2, 3)) + floor
     if rng is not None:
         batch = augment(batch, rng)
         if wi_per_step:
@@ -290,9 +289,10 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
           floor: float = ENERGY_FLOOR):
     """Train for ``minutes``, from ``make_network``'s start or, with ``init``, from an exported network
     (``warm_start``); returns the network at its best split-validation loss (checked every few seconds) and what
-    happened. ``area``: the form with the area exponents (module docstring); ``hidden``: the hidden
-    layers' widths (a warm start takes its network's); ``wi_per_step`` and ``floor``: ``lobe_loss``'s. ``seed`` sets the start and the batches; the split into
-    training and validation configurations is ``SPLIT_SEED``'s for every seed, so that runs compare on one split."""
+    happened. ``area``: the form with the area exponents (module docstring); ``hidden``: the hidden layers'
+    widths (a warm start takes its network's); ``wi_per_step`` and ``floor``: ``lobe_loss``'s. ``seed`` sets the
+    start and the batches; the split into training and validation configurations is ``SPLIT_SEED``'s for every
+    seed, so that runs compare on one split."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     order = np.random.default_rng(SPLIT_SEED).permutation(len(data["rows"]))
@@ -324,9 +324,9 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
                     f"validation loss {val_loss:.3e} (best {best[0]:.3e})  ({time.time() - start:.0f} s)", flush=True)
     if best[1] is not None:
         net.load_state_dict(best[1])
-    return net, {"seed": seed, "epochs": epoch, "steps": step, "best_step": best[2], "batch": batch, "device": str(DEVICE),
-                 "wi_per_step": wi_per_step, "energy_floor": floor, "precision": str(PRECISION).removeprefix("torch."),
-                 "seconds": round(time.time() - start, 1),
+    return net, {"seed": seed, "epochs": epoch, "steps": step, "best_step": best[2], "batch": batch,
+                 "device": str(DEVICE), "wi_per_step": wi_per_step, "energy_floor": floor,
+                 "precision": str(PRECISION).removeprefix("torch."), "seconds": round(time.time() - start, 1),
                  "train_configs": int(len(train_idx)), "split_validation_configs": int(n_val), "val_index": val}
 
 
