@@ -23,7 +23,7 @@ import numpy as np
 
 from . import MAPPINGS, fittable, fitted, predicted_image
 
-FITTER_VERSION = 6  # bump when fits change, so cached ones are not reused
+FITTER_VERSION = 7  # bump when fits change, so cached ones are not reused
 CHOICE_RESOLUTION = 48
 CHOICE_FURNACE_WIDTH = 12  # the furnace panorama's width (the bench's is 24: its prediction costs an albedo per pixel)
 AUTO_MARGIN = 0.01  # Auto takes the fitted mapping only where it is lower by this much (absolute rel. RMSE)

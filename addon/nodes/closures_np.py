@@ -364,12 +364,25 @@ def beckmann_reflection(wi, wo, alpha, eta=None, normal=(0.0, 0.0, 1.0)):
     return f
 
 
-def beckmann_refraction(wi, wo, alpha, ior, normal):
-    """What Cycles renders for a Beckmann refraction closure (no Fresnel: Refraction BSDF node, OSL
-    ``microfacet("beckmann", normal, ..., ior, 1)``) around ``normal`` (N, 3), as a BSDF w.r.t. z (light below the
-    surface only). Cycles' eval (its ωi is our ωo): H = −(η ωi + ωo) normalised, D(H) G2 |H·ωo| |H·ωi| η² /
-    (cos(N, ωo) |η ωi + ωo|²), which includes the closure's cosine of ωi, so the value here is that over
-    |cos θi|; valid for ωo above N and the surface, ωi below both."""
+def ggx_d_cos(cos_h, alpha):
+    """Isotropic GGX NDF α² / (π (cos²θh (α² − 1) + 1)²) (even in cos θh, as in Cycles' kernel)."""
+    c2 = np.minimum(np.asarray(cos_h, dtype=float) ** 2, 1.0)
+    a2 = np.asarray(alpha, dtype=float) ** 2
+    return a2 / (np.pi * np.maximum((c2 * (a2 - 1.0) + 1.0) ** 2, 1e-300))
+
+
+def ggx_lambda_cos(cos_v, alpha):
+    """Isotropic GGX Smith Λ at cos θ = ``cos_v``: (sqrt(1 + α² tan²θ) − 1) / 2."""
+    c2 = np.maximum(np.minimum(np.asarray(cos_v, dtype=float) ** 2, 1.0), 1e-300)
+    return 0.5 * (np.sqrt(1.0 + np.asarray(alpha, dtype=float) ** 2 * (1.0 / c2 - 1.0)) - 1.0)
+
+
+def _refraction(wi, wo, alpha, ior, normal, d_of_cos, lambda_of_cos):
+    """What Cycles renders for a Fresnel-free microfacet refraction closure of NDF ``d_of_cos`` and Smith
+    ``lambda_of_cos`` (both of a cosine to ``normal``) around ``normal`` (N, 3), as a BSDF w.r.t. z (light below
+    the surface only). Cycles' eval (its ωi is our ωo; kernel closure/bsdf_microfacet.h, the same in 4.2 and 5.0):
+    H = −(η ωi + ωo) normalised, D(H) G2 |H·ωo| |H·ωi| η² / (cos(N, ωo) |η ωi + ωo|²), which includes the closure's
+    cosine of ωi, so the value here is that over |cos θi|; valid for ωo above N and the surface, ωi below both."""
     n = len(wi)
     a = _cycles_alpha(alpha, n)
     eta = np.broadcast_to(np.asarray(ior, dtype=float), (n,))
@@ -379,11 +392,24 @@ def beckmann_refraction(wi, wo, alpha, ior, normal):
     ht = -(eta[:, None] * wi + wo)
     len2 = np.maximum(_dot(ht, ht), 1e-300)
     h = ht / np.sqrt(len2)[:, None]
-    g2 = 1.0 / (1.0 + beckmann_lambda(c_v, a) + beckmann_lambda(c_l, a))
+    g2 = 1.0 / (1.0 + lambda_of_cos(c_v, a) + lambda_of_cos(c_l, a))
     with np.errstate(divide="ignore", invalid="ignore"):
-        value = (beckmann_d(_dot(normal, h), a) * g2 * np.abs(_dot(h, wo) * _dot(h, wi)) * eta * eta
+        value = (d_of_cos(_dot(normal, h), a) * g2 * np.abs(_dot(h, wo) * _dot(h, wi)) * eta * eta
                  / (np.where(ok, c_v, 1.0) * len2 * np.maximum(np.abs(wi[:, 2]), 1e-300)))
     return np.repeat(np.where(ok, value, 0.0)[:, None], 3, axis=1)
+
+
+def beckmann_refraction(wi, wo, alpha, ior, normal):
+    """Cycles' Beckmann refraction closure (no Fresnel: Refraction BSDF node, OSL ``microfacet("beckmann", normal,
+    ..., ior, 1)``) around ``normal`` (``_refraction``)."""
+    return _refraction(wi, wo, alpha, ior, normal, beckmann_d, beckmann_lambda)
+
+
+def ggx_refraction(wi, wo, alpha, ior, normal):
+    """Cycles' GGX refraction closure (no Fresnel: Refraction BSDF node, OSL ``microfacet("ggx", normal, ..., ior,
+    1)``) around ``normal`` (``_refraction``): about the view with a large ``ior``, a lobe about the straight-through
+    direction with GGX's long tails (a forward-scattering medium's)."""
+    return _refraction(wi, wo, alpha, ior, normal, ggx_d_cos, ggx_lambda_cos)
 
 
 # The albedo of Beckmann lobes of any width: for α below GRID_ALPHA by Gauss-Hermite nodes in microfacet slope space
@@ -633,6 +659,7 @@ EVAL = {
     "dielectric": dielectric,
     "beckmann": beckmann_reflection,
     "beckmann_refraction": beckmann_refraction,
+    "ggx_refraction": ggx_refraction,
 }
 
 # Closures whose directional albedo is computed by its own quadrature (sharp lobes), not on a direction grid.

@@ -188,9 +188,10 @@ class NumpyBackend(NumpyMath):
                 lobe_fresnel(self, color, eta, alpha), None)
         self._add("beckmann", color, alpha=alpha, eta=eta, **({} if normal is None else {"normal": normal}))
 
-    def beckmann_refraction(self, color, alpha, ior, normal):
-        """Beckmann refraction without Fresnel around ``normal`` (a direction) into a medium of relative ``ior``."""
-        self._add("beckmann_refraction", color, alpha=alpha, ior=ior, normal=normal)
+    def refraction(self, color, alpha, ior, normal, distribution="beckmann"):
+        """Refraction without Fresnel (``distribution``: "beckmann" or "ggx") around ``normal`` (a direction) into
+        a medium of relative ``ior``."""
+        self._add(f"{distribution}_refraction", color, alpha=alpha, ior=ior, normal=normal)
 
     def velvet(self, color, sigma):
         """Cycles' Ashikhmin velvet around the shading normal (``closures_np.velvet``)."""
@@ -550,9 +551,9 @@ class OslBackend:
             self._closure(1.0, f'dielectric_bsdf({n}, Tn, {_osl(color).code}, color(0), {a}, {a}, {_osl(eta).code}, '
                                f'"beckmann")')
 
-    def beckmann_refraction(self, color, alpha, ior, normal):
+    def refraction(self, color, alpha, ior, normal, distribution="beckmann"):
         a = _osl(alpha).code
-        self._closure(color, f'microfacet("beckmann", {normal.code}, Tn, {a}, {a}, {_osl(ior).code}, 1)')
+        self._closure(color, f'microfacet("{distribution}", {normal.code}, Tn, {a}, {a}, {_osl(ior).code}, 1)')
 
     def velvet(self, color, sigma):
         self._closure(color, f"ashikhmin_velvet(N, {_osl(sigma).code})")

@@ -4,7 +4,7 @@ to the reference BSDF (issue 14; bpy-free).
 What a mapping's ``shade`` renders is a sum of closures whose weights depend on the view only. The fitted mapping
 keeps those closures (their shapes: narrow peaks, tilted normals, anisotropy) and multiplies each closure's colour
 by an RGB table over the view cosine; it may add up to ``MAX_EXTRAS`` closures from a small dictionary (Lambert,
-translucency, GGX around the normal, Beckmann refraction around the view, Ashikhmin velvet for light between
+translucency, GGX around the normal, GGX refraction around the view, Ashikhmin velvet for light between
 grazing directions, Toon lobes for wide lobes that keep grazing light), each with an RGB weight table, beside the
 material's closures or in place of one of them: the fitted mapping renders at most as many closures as the analytic
 one (its render cost). Per tabulated view cosine the weights minimise the cosine-weighted error against the
@@ -85,8 +85,7 @@ def extra_dictionary(toons: bool = False) -> list[tuple[str, dict]]:
     up = (0.0, 0.0, 1.0)
     out = [("diffuse", {}), ("translucent", {})]
     out += [("ggx", {"alpha": a, "normal": up}) for a in (0.1, 0.15, 0.2, 0.3, 0.45, 0.6, 0.8, 1.0)]
-    out += [("beckmann_refraction", {"alpha": a, "ior": 10.0, "normal": "view"})
-            for a in (0.1, 0.2, 0.3, 0.5, 0.7, 1.0)]
+    out += [("ggx_refraction", {"alpha": a, "ior": 10.0, "normal": "view"}) for a in (0.1, 0.2, 0.3, 0.5, 0.7, 1.0)]
     out += [("velvet", {"sigma": s}) for s in (0.2, 0.3, 0.5)]  # wider ones rob the sun-lit views (leaf)
     return out + list(TOONS) if toons else out
 
@@ -581,8 +580,9 @@ def fit_variants(backend_of, ref_eval, ref_albedo, form: str, variants, groups=N
             best = _solve_all(stacked, use)
             error = _error(systems, best)
         else:
-            use, best, error = _chosen(systems, stacked, analytic_use, n_analytic, budget, toons or ~toon,
-                                       MAX_EXTRAS + spare)
+            # with spare closures, the greedy path may end above the shipped budget's: a larger budget keeps both
+            use, best, error = min((_chosen(systems, stacked, analytic_use, n_analytic, budget - s, toons or ~toon,
+                                            MAX_EXTRAS + spare - s) for s in sorted({spare, 0})), key=lambda c: c[2])
         x = np.transpose(np.stack(best), (2, 0, 1))  # (A + E, K, 3)
         chosen = np.flatnonzero(use[n_analytic:])
         fits.append(Fit(x[:n_analytic], tuple(extras[e] for e in chosen), x[n_analytic + chosen], error_analytic,
@@ -657,7 +657,7 @@ def fit_driven(problems, driven: Driven, form: str, damping: float = 1.0, toons:
 
 # ------------------------------------------------------------------------------ shading
 
-CLOSURES = ("glossy", "diffuse", "translucent", "conductor", "dielectric", "beckmann", "beckmann_refraction")
+CLOSURES = ("glossy", "diffuse", "translucent", "conductor", "dielectric", "beckmann", "refraction")
 
 
 class ScaledBackend:
@@ -756,7 +756,8 @@ def shade(b, mapping, p, fit: Fit, knot_backend) -> None:
         color = scaled.table(weights)
         if kind == "ggx":
             b.glossy(color, kw["alpha"], kw["alpha"], b.normal())
-        elif kind == "beckmann_refraction":
-            b.beckmann_refraction(color, kw["alpha"], kw["ior"], b.view() if kw["normal"] == "view" else b.normal())
+        elif kind.endswith("_refraction"):  # "beckmann_refraction" in fits made before FITTER_VERSION 7
+            b.refraction(color, kw["alpha"], kw["ior"], b.view() if kw["normal"] == "view" else b.normal(),
+                         kind.removesuffix("_refraction"))
         else:  # diffuse, translucent, velvet, toons: the backend's method of that name takes the parameters
             getattr(b, kind)(color, **kw)

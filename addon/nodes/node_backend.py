@@ -491,10 +491,10 @@ class NodeBackend:
             self.links.new(shader_socket, mix.inputs[2])
             self._add(mix.outputs[0], d)
 
-    def beckmann_refraction(self, color, alpha, ior, normal):
-        """Refraction BSDF (Beckmann, no Fresnel) around ``normal`` (a direction)."""
+    def refraction(self, color, alpha, ior, normal, distribution="beckmann"):
+        """Refraction BSDF (no Fresnel; ``distribution`` "beckmann" or "ggx") around ``normal`` (a direction)."""
         self._closure("ShaderNodeBsdfRefraction", {"Color": color, "Roughness": self._roughness(alpha), "IOR": ior,
-                                                   "Normal": normal}, distribution="BECKMANN")
+                                                   "Normal": normal}, distribution=distribution.upper())
 
     def velvet(self, color, sigma):
         """Sheen BSDF, Ashikhmin distribution (its Roughness is the velvet's σ)."""

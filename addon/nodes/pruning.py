@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 CLOSURE_CALLS = ("glossy", "metal", "diffuse", "translucent", "transparent", "conductor", "dielectric", "beckmann",
-                 "beckmann_refraction", "velvet", "bulk")
+                 "refraction", "velvet", "bulk")
 MAX_SHARE = 0.1  # the most energy a pruned set leaves out, as a fraction of the material's largest albedo
 # Views of the energy measurement: cosines down to grazing, azimuths for anisotropic closures.
 VIEW_COSINES = (1.0, 0.85, 0.6, 0.35, 0.15, 0.05)

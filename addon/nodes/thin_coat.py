@@ -233,7 +233,7 @@ def shade(b, p: model.Params) -> None:
         else:
             stretch = 1.0 - 1.0 / SLAB_IOR  # direction deviation per facet tilt at normal incidence
             alpha = lobe_alpha(b, lobe.kappa, stretch)
-            b.beckmann_refraction(lobe.weight, alpha, SLAB_IOR, b.view())
+            b.refraction(lobe.weight, alpha, SLAB_IOR, b.view())
     if diffuse is not None:
         b.diffuse(b.scale(diffuse * mean_entry(ops, eta, k1, sigma_d), np.pi))
 
