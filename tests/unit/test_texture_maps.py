@@ -46,10 +46,13 @@ def _expected(inputs, y, x):
 
 
 def _assert_texel(maps, layout, inputs, y, x):
+    """Within float32 inference's reach: the network runs in float32 (``bake.mlp``), and BLAS sums a chunk of texels
+    in another order than one stack: up to 2.1e-5 relative on a machine of 2026-12-06 (AVX-512), where a tolerance of
+    1e-6 had held on the machines before."""
     expected = _expected(inputs, y, x)
     for name, channels in layout.items():
         want = [expected[e[0]][e[1]] if e else (1.0 if c == 3 else 0.0) for c, e in enumerate(channels)]
-        np.testing.assert_allclose(maps[name][y, x], want, rtol=1e-6, atol=1e-7, err_msg=f"{name} at {(y, x)}")
+        np.testing.assert_allclose(maps[name][y, x], want, rtol=1e-4, atol=1e-6, err_msg=f"{name} at {(y, x)}")
 
 
 def test_every_texel_is_the_prediction_for_that_texels_parameters():
