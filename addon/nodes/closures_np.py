@@ -364,17 +364,11 @@ def beckmann_reflection(wi, wo, alpha, eta=None, normal=(0.0, 0.0, 1.0)):
     return f
 
 
-def ggx_d_cos(cos_h, alpha):
-    """Isotropic GGX NDF α² / (π (cos²θh (α² − 1) + 1)²) (even in cos θh, as in Cycles' kernel)."""
-    c2 = np.minimum(np.asarray(cos_h, dtype=float) ** 2, 1.0)
-    a2 = np.asarray(alpha, dtype=float) ** 2
-    return a2 / (np.pi * np.maximum((c2 * (a2 - 1.0) + 1.0) ** 2, 1e-300))
-
-
-def ggx_lambda_cos(cos_v, alpha):
-    """Isotropic GGX Smith Λ at cos θ = ``cos_v``: (sqrt(1 + α² tan²θ) − 1) / 2."""
-    c2 = np.maximum(np.minimum(np.asarray(cos_v, dtype=float) ** 2, 1.0), 1e-300)
-    return 0.5 * (np.sqrt(1.0 + np.asarray(alpha, dtype=float) ** 2 * (1.0 / c2 - 1.0)) - 1.0)
+def _at_cosine(cos):
+    """A direction at |``cos``| to the closure's normal, in its frame (the isotropic ``ggx_d`` and ``ggx_lambda``
+    of a cosine: D even in cos θh, as in Cycles' kernel)."""
+    c = np.minimum(np.abs(np.asarray(cos, dtype=float)), 1.0)
+    return np.stack([np.sqrt(1.0 - c * c), np.zeros_like(c), c], axis=1)
 
 
 def _refraction(wi, wo, alpha, ior, normal, d_of_cos, lambda_of_cos):
@@ -409,7 +403,8 @@ def ggx_refraction(wi, wo, alpha, ior, normal):
     """Cycles' GGX refraction closure (no Fresnel: Refraction BSDF node, OSL ``microfacet("ggx", normal, ..., ior,
     1)``) around ``normal`` (``_refraction``): about the view with a large ``ior``, a lobe about the straight-through
     direction with GGX's long tails (a forward-scattering medium's)."""
-    return _refraction(wi, wo, alpha, ior, normal, ggx_d_cos, ggx_lambda_cos)
+    return _refraction(wi, wo, alpha, ior, normal, lambda c, a: ggx_d(_at_cosine(c), a, a),
+                       lambda c, a: ggx_lambda(_at_cosine(c), a, a))
 
 
 # The albedo of Beckmann lobes of any width: for α below GRID_ALPHA by Gauss-Hermite nodes in microfacet slope space
