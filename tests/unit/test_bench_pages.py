@@ -38,12 +38,12 @@ def test_the_closure_budget_section_lists_only_presets_whose_fit_misses_a_goal(m
     spongecake_sheen = spongecake.params_from_dict(presets.load("spongecake", "sheen")).to_dict()
     monkeypatch.setattr(choice, "choose", choose)
     monkeypatch.setattr(fit_ceiling, "ceiling_rows", lambda model_id, p, resolution: [
-        {"spare": n, "closures": 2 + n, "fit_error": 0.4 - 0.1 * n, "errors": missed, "means": means}
-        for n in fit_ceiling.SPARE])
+        {"spare": n, "closures": 2 + i, "fit_error": 0.4 - 0.1 * i, "errors": missed, "means": means}
+        for i, n in enumerate((*fit_ceiling.SPARE, fit_ceiling.EVERY))])
     section = fit_ceiling.accuracy(bench.Sizes(resolution=8))
     rows = [line for line in section.splitlines() if line.startswith("| spongecake") or line.startswith("| thin")]
-    assert rows == [f"| spongecake | sheen | {n} | {2 + n} | {40 - 10 * n:.1f}% | 5.0% | 30.0% | n/a | 1.0% |"
-                    for n in fit_ceiling.SPARE]
+    assert rows == [f"| spongecake | sheen | {n} | {2 + i} | {40 - 10 * i:.1f}% | 5.0% | 30.0% | n/a | 1.0% |"
+                    for i, n in enumerate((*fit_ceiling.SPARE, fit_ceiling.EVERY))]
     assert fit_ceiling.misses_a_goal(missed, means) and not fit_ceiling.misses_a_goal(fine, means)
 
 

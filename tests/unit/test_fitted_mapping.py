@@ -183,6 +183,23 @@ def test_spare_closures_may_render_beyond_the_analytic_count_and_never_fit_worse
     assert spared.error_fitted < shipped.error_fitted
 
 
+def test_every_closure_at_once_fits_no_worse_than_any_choice_of_them(monkeypatch):
+    """``bench.fit_ceiling``'s every-closure row is a bound: each view's fit is a convex non-negative least squares,
+    so the whole dictionary at once fits at least as well as the greedy choice of a few of its closures (the
+    tiny ridge towards the analytic mapping aside), with spare closures or without."""
+    monkeypatch.setattr(fitted, "KNOTS", 5)
+    monkeypatch.setattr(fitted, "AZIMUTHS", 2)
+    p = _preset(spongecake, "sheen")
+    problem = choice.fit_problem(spongecake.ID, p, "osl")
+    for damping in (0.5, 1.0):
+        every = fitted.fit_variants(*problem, "osl", [(damping, True)], extras=fitted.extra_dictionary(toons=True))[0]
+        assert len(every.extras) == len(fitted.extra_dictionary(toons=True))
+        chosen = [fitted.fit_variants(*problem, "osl", [(damping, toons)], spare=spare)[0]
+                  for toons in (False, True) for spare in (0, 2)]
+        assert every.error_fitted <= min(f.error_fitted for f in chosen) + 1e-4
+        assert every.error_fitted < every.error_analytic
+
+
 def test_every_variant_is_fitted_at_once_and_cached_each_on_its_own(monkeypatch):
     p = _preset(thin_coat, "rough_over_smooth")
     calls = []
