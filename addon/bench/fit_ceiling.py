@@ -55,8 +55,8 @@ def accuracy(sizes) -> str:
              "addon.bench.fit_ceiling`; 0 spare: the Fitted mapping as it ships), and with every closure of the "
              f"dictionary at once ({EVERY}: its {len(fitted.extra_dictionary(toons=True))} extra closures beside the "
              "material's own). Fit: relative RMSE in the fit's own quadrature; each view's fit is a non-negative least "
-             f"squares, so the {EVERY} row's fit error is the least any choice of these closures reaches (per weighting). "
-             "The scenes as in *Analytic and fitted mappings*.", "",
+             f"squares, so the {EVERY} row's fit error is the least any choice of these closures reaches (per "
+             "weighting). The scenes as in *Analytic and fitted mappings*.", "",
              "| model | preset | spare closures | closures | fit | " + " | ".join(ACCURACY_SCENES) + " |",
              "|---|---|---|---|---|" + "---|" * len(ACCURACY_SCENES)]
     for model_id in (m for m in MODELS if fittable(m)):

@@ -49,7 +49,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..models.spongecake import Layer, Params, Substrate, energy_cosines, params_from_dict
-from . import hg, lobes, microfacet, sggx
+from . import frames, hg, lobes, microfacet, sggx
 from .frames import as_directions, dot, spherical
 
 __all__ = ["Params", "Sample", "params_from_dict", "eval", "eval_multiple", "pdf", "sample", "delta_transmittance",
@@ -613,6 +613,8 @@ def _free_flight(params: Params, z, d, rng):
 
 BLOCK_PAIRS = 16  # a light direction with at least this many view directions gets its NEE as blocks
 CHUNK = 1 << 19  # vertex-direction pairs per array
+BLOCK = 1 << 15  # vertex-direction pairs per block (its arrays stay in the cache)
+NEAR_OPPOSITE = 1e-12  # |wi + wo|^2 below which ``_phase_block`` forms h as the exact sum
 
 
 def _nee(params: Params, state, wo_pairs, kappa_o, slots, sums):
@@ -635,7 +637,7 @@ def _nee(params: Params, state, wo_pairs, kappa_o, slots, sums):
     bounds = np.searchsorted(group[order], np.arange(len(slots) + 1))
     for g in np.flatnonzero(np.diff(bounds)):
         pairs = slots[g][slots[g] >= 0]
-        step = max(1, CHUNK // len(pairs))
+        step = max(1, BLOCK // len(pairs))
         for start in range(bounds[g], bounds[g + 1], step):
             v = order[start:min(start + step, bounds[g + 1])]
             sums[pairs] += _vertex_block(params, z[v], -d[v], beta[v], layer[v], surface[v], wo_pairs[pairs],
@@ -664,25 +666,30 @@ def _vertex_to(params: Params, z, wi, layer, surface, wo, kappa_o):
 def _vertex_block(params: Params, z, wi, beta, layer, surface, wo, kappa_o):
     """Sum over the vertices (depth z, direction to the light wi, throughput beta) of their next-event estimates
     towards each wo, (P, 3): the transmittance to the top or bottom, and at a volume vertex albedo F f_p / |cos wo|
-    (position-free form of the path integral, Guo et al. 2018), at the substrate its BSDF."""
+    (position-free form of the path integral, Guo et al. 2018), at the substrate its BSDF. The optical depths to
+    either side are one matrix product (the overlaps above and below against the exit depths of the directions
+    that leave on that side); the transmittance is float32 (relative 1e-7, far below the walk's noise)."""
     up = wo[:, 2] > 0
     j = np.arange(len(params.layers))
-    above, below = np.clip(z[:, None] - j, 0.0, 1.0), np.clip(j + 1 - z[:, None], 0.0, 1.0)  # (V, L) overlaps
-    transmittance = np.exp(-np.where(up, above @ kappa_o, below @ kappa_o))  # (V, P)
+    overlaps = np.concatenate([np.clip(z[:, None] - j, 0.0, 1.0), np.clip(j + 1 - z[:, None], 0.0, 1.0)], axis=1)
+    optical = overlaps @ np.concatenate([kappa_o * up, kappa_o * ~up])  # (V, P)
+    transmittance = np.exp(-optical.astype(np.float32))
     out = np.zeros((len(wo), 3))
-    reach = transmittance / np.abs(wo[:, 2])
+    leave = (1.0 / np.abs(wo[:, 2])).astype(np.float32)
     if params.substrate is not None:
-        reach[:, ~up] = 0.0  # the substrate blocks transmission out of the stack
+        leave[~up] = 0.0  # the substrate blocks transmission out of the stack
+    reach = transmittance * leave
     for k, lay in enumerate(params.layers):
         m = ~surface & (layer == k)
         if not m.any():
             continue
         pdf, fresnel_share = _phase_block(lay, wi[m], wo)
         weight = (beta[m] * np.asarray(lay.albedo)).T  # (3, V)
-        value = weight @ (pdf * reach[m])  # (3, P)
+        pdf *= reach[m]
+        value = weight @ pdf  # (3, P)
         if fresnel_share is not None:  # Schlick: f0 + (1 - f0) (1 - cos)^5, linear in f0
             f0 = np.asarray(lay.f0)[:, None]
-            value = f0 * value + (1.0 - f0) * (weight @ (fresnel_share * pdf * reach[m]))
+            value = f0 * value + (1.0 - f0) * (weight @ (fresnel_share * pdf))
         out += value.T
     if params.substrate is not None and surface.any():
         n = int(surface.sum())
@@ -691,29 +698,56 @@ def _vertex_block(params: Params, z, wi, beta, layer, surface, wo, kappa_o):
     return out
 
 
+@lru_cache(maxsize=64)
+def _axis_frame(axis: tuple) -> tuple:
+    """The orthonormal frame (e1, e2, axis) of an SGGX axis (``sggx.coords``' frame), once per axis."""
+    axis = np.asarray(axis)
+    return (*frames.basis(axis), axis)
+
+
+def _axis_coordinates(s: sggx.SGGX, w):
+    """The coordinates of the rows w in the SGGX axis frame, each an elementwise sum, so that the coordinates of -w
+    are exactly the negated ones (h = wi + wo is exactly 0 at wo = -wi, as ``eval`` forms it)."""
+    return [w[:, 0] * f[0] + w[:, 1] * f[1] + w[:, 2] * f[2] for f in _axis_frame(tuple(s.axis))]
+
+
 def _phase_block(layer: Layer, wi, wo):
     """``_phase_pdf`` for every pair of the rows wi (V) and wo (P), (V, P), and for flakes with a Fresnel the
     Schlick factor (1 - |wi . h|)^5 (else None). D(h / |h|) = (|h|^2 / h^T S^-1 h)^2 / (pi sqrt(det S)) for the
-    unnormalised h = wi + wo, formed in world coordinates as ``eval`` forms it (at wo = -wi its rounding decides the
-    limit, as there); the part of |h|^2 across the axis is |h|^2 - (h . axis)^2, whose rounding (1e-16 |h|^2) is
-    far below the across term's own weight 1 / a even at alpha = 1e-4 (tested against ``_phase_value``)."""
+    unnormalised h = wi + wo, whose parts across and along the axis are summed from the two directions' coordinates
+    in the axis frame; where wo is within about 1e-6 of -wi, the direction of h lies in the last bits of the two, so
+    h there is the exact sum wi + wo, as ``eval`` forms it (tested against ``_phase_value``). Elsewhere the Fresnel
+    cosine wi . h / |h| is |h| / 2 (wi . h = |h|^2 / 2 for unit directions)."""
     if not layer.is_flake:
         return hg.eval(layer.roughness, -(wi @ wo.T)), None
     s = _sggx(layer)
-    world = [wi[:, k, None] + wo[None, :, k] for k in range(3)]  # h as eval forms it, so limits (h -> 0) agree
-    length2 = world[0] * world[0] + world[1] * world[1] + world[2] * world[2]
-    along = sum(world[k] * s.axis[k] for k in range(3)) ** 2
-    across = np.maximum(length2 - along, 0.0)
-    cw = sggx.coords(s, wi)
-    q = across / s.a + along / s.b
-    ratio = np.divide(length2, q, out=np.zeros_like(q), where=q > 0)
-    sigma_i = np.sqrt(s.a * (cw[:, 0] ** 2 + cw[:, 1] ** 2) + s.b * cw[:, 2] ** 2)
-    pdf = ratio * ratio / (np.pi * np.sqrt(sggx.det(s)) * 4.0 * sigma_i[:, None])
-    if not layer.has_fresnel:
+    ci, co = _axis_coordinates(s, wi), _axis_coordinates(s, wo)
+    h1, h2 = ci[0][:, None] + co[0], ci[1][:, None] + co[1]
+    across = h1 * h1
+    across += h2 * h2
+    along = ci[2][:, None] + co[2]
+    along *= along
+    length2 = across + along
+    cos = 0.5 * np.sqrt(length2) if layer.has_fresnel else None
+    near = length2 < NEAR_OPPOSITE
+    if near.any():
+        near = np.nonzero(near)
+        h = wi[near[0]] + wo[near[1]]
+        exact = _axis_coordinates(s, h)
+        across[near], along[near] = exact[0] ** 2 + exact[1] ** 2, exact[2] ** 2
+        length2[near] = across[near] + along[near]
+        if cos is not None:
+            cos[near] = np.abs(dot(wi[near[0]], h)) / np.maximum(np.sqrt(length2[near]), 1e-300)
+    q = across * (1.0 / s.a) + along * (1.0 / s.b)
+    pdf = np.divide(length2, q, out=np.zeros_like(q), where=q > 0)
+    pdf *= pdf
+    sigma_i = np.sqrt(s.a * (ci[0] ** 2 + ci[1] ** 2) + s.b * ci[2] ** 2)
+    pdf *= (1.0 / (np.pi * np.sqrt(sggx.det(s)) * 4.0 * sigma_i))[:, None]
+    if cos is None:
         return pdf, None
-    cos = np.divide(sum(wi[:, k, None] * world[k] for k in range(3)), np.sqrt(length2), out=np.ones_like(q),
-                    where=length2 > 0)
-    return pdf, (1.0 - np.clip(np.abs(cos), 0.0, 1.0)) ** 5
+    share = 1.0 - np.minimum(cos, 1.0)
+    square = share * share
+    return pdf, share * square * square
 
 
 def _scatter(params: Params, state, rng):
