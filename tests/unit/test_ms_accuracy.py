@@ -21,20 +21,21 @@ from addon.reference import spongecake as ref
 
 MIN_TRAINING_CONFIGS = 100
 THRESHOLDS = {
-    # Regression bounds a little above what the shipped networks measure (docs/accuracy.md), not goals.
+    # Regression bounds a little above what the shipped networks measure (docs/accuracy.md), not goals; where issue
+    # 15's goal is met, the goal itself.
     # White furnace of non-absorbing stacks of 1-4 layers, SS + MS with the energy scale: mean and worst |1 - a| and
-    # the largest a. Issue 15's goal (3% / 10% / 1.005) is met for the mean and worst: 0.9% / 9.5% / 1.010 measured
-    # (the network alone, without the scale: 19.7% / 120% / 2.2).
-    "furnace_mean": 0.02,
-    "furnace_worst": 0.12,
-    "furnace_max": 1.02,
+    # the largest a. Issue 15's goal (3% / 10% / 1.005): 0.4% / 5.1% / 1.0032 measured (the network alone, without
+    # the scale: 11.5% / 91.6% / 1.92).
+    "furnace_mean": 0.03,
+    "furnace_worst": 0.10,
+    "furnace_max": 1.005,
     # held-out validation set, with the energy scale: mean relative lobe error per layer count (no MS at all scores
-    # 1.0); measured 63.8% (1 layer) and 40.1% (2 layers)
-    "validation_mean_lobe_error_1": 0.65,
-    "validation_mean_lobe_error_2": 0.45,
-    # the same for the network's lobes alone, before the energy scale: measured 60.9% and 40.1%
-    "validation_mean_network_lobe_error_1": 0.65,
-    "validation_mean_network_lobe_error_2": 0.45,
+    # 1.0); measured 38.7% (1 layer) and 28.0% (2 layers); issue 15's goal is 25%
+    "validation_mean_lobe_error_1": 0.42,
+    "validation_mean_lobe_error_2": 0.31,
+    # the same for the network's lobes alone, before the energy scale: measured 40.4% and 30.5%
+    "validation_mean_network_lobe_error_1": 0.43,
+    "validation_mean_network_lobe_error_2": 0.33,
     # rendered: SS + MS (network) vs Monte Carlo at most this times SS only vs Monte Carlo (presets, lit scenes)
     "rendered_ratio": 1.0,
 }
