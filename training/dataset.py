@@ -12,7 +12,7 @@ re-running skips the shards already there, so an interrupted run resumes. Every 
 two independent halves, which gives its Monte Carlo noise for free: the standard error of the stored mean is
 |a - b| / 2 per pair (``noise`` below).
 
-    python -m training.dataset --layers 1 2 --configs 2000 4000            # the documented default (about an hour)
+    python -m training.dataset --layers 1 2 --configs 5075 12000           # the default: what the shipped networks saw
     python -m training.dataset --quick --out /tmp/lamina-quick             # seconds, for tests
     python -m training.dataset --throughput                                # paths per second (one process)
     python -m training.dataset --pack /tmp/ms-pack.npz                     # one compact file to train elsewhere
@@ -265,7 +265,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.dataset", description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=DEFAULT_CACHE, help=f"cache folder (default {DEFAULT_CACHE})")
     ap.add_argument("--layers", type=int, nargs="+", default=[1, 2], choices=[1, 2, 3, 4])
-    ap.add_argument("--configs", type=int, nargs="+", default=[2000, 4000], help="configurations per layer count")
+    ap.add_argument("--configs", type=int, nargs="+", default=[5075, 12000],
+                    help="configurations per layer count (the default: what the shipped networks saw)")
     ap.add_argument("--paths", type=int, default=Size.paths, help="random-walk paths per wi")
     ap.add_argument("--n-wi", type=int, default=Size.n_wi)
     ap.add_argument("--n-wo", type=int, default=Size.n_wo)
