@@ -73,7 +73,7 @@ bench: venv
 	$(PY) -m addon.cli bench --out docs --resolution 48 --samples 32
 
 # The documented default dataset, what the shipped networks saw: 5075 one-layer and 12000 two-layer configurations
-# (resumable; under 2 hours on 2 cores with the walk of 2026-12-07: docs/training.md, *Dataset*).
+# (resumable; about 2.5 hours on 2 cores beside other work, from the runs' logs: docs/training.md, *Dataset*).
 dataset: venv
 	$(PY) -m training.dataset --out $(DATA)
 
