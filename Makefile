@@ -80,8 +80,9 @@ dataset: venv
 # The two networks side by side, one core each, in the forms of the shipped ones, from scratch (their manifests say
 # what they saw and how long they trained). The shipped networks are chains of warm starts (--init
 # addon/bake/weights): the two-layer one this recipe run for 65 minutes on the 6825 configurations made by then, then
-# 52 minutes on all 12000 (docs/training.md measures it against a 52-minute run from scratch); the one-layer one
-# 40 minutes of this recipe from the network trained on 1800 configurations before it, on 4568 of the 5075.
+# 52 minutes on all 12000 (docs/training.md measures it against a 52-minute run from scratch), then 45 minutes with
+# --scaled-loss --energy-weight 0.5 (the shape the energy scale renders); the one-layer one 40 minutes of this recipe
+# from the network trained on 1800 configurations before it, on 4568 of the 5075.
 TRAIN_1 ?= --area --float32 --wi-per-step 4 --minutes 40
 TRAIN_2 ?= --area --hidden 192 192 192 --float32 --wi-per-step 4 --minutes 65
 train: venv

@@ -23,6 +23,7 @@ either form. ``--ensemble`` writes the mean of runs as one network (``export_ens
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
 import json
 import math
@@ -46,6 +47,7 @@ WEIGHT_DECAY = 1e-4  # AdamW; a few thousand configurations per network: keep th
 SPLIT_SEED = 0  # which configurations are held out for split validation: the same whatever --seed
 ENERGY_WEIGHT = 2.0  # energy matters most in renders (and the furnace); see lobe_loss
 ENERGY_FLOOR = 1e-3  # about the median configuration's mean f |cos wo| of multiple scattering in the dataset
+MAX_SCALE = ms.MAX_SCALE  # the most the scaled loss may scale a wi's predicted lobe by (as the add-on's energy scale)
 VALIDATION_SET = Path(__file__).resolve().parents[1] / "tests" / "data" / "spongecake_ms_validation"
 DEVICE = torch.device("cpu")  # where training runs (``--device``); the exported weights are numpy either way
 PRECISION = torch.float64  # what training computes in (``--float32``); the exported weights are float32 either way
@@ -193,11 +195,23 @@ def predicted_lobe(net, rows: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor) 
     return ((f + lambert) * big_wo[..., 2:].abs()).reshape(*wi.shape[:2], wo.shape[1], 3)
 
 
-def lobe_loss(net, data: dict, index, rng=None, wi_per_step: int | None = None,
-              floor: float = ENERGY_FLOOR) -> torch.Tensor:
-    """MAE of f |cos wo| per configuration, plus ENERGY_WEIGHT times the MAE of the energy each wi sends back and
-    through (f |cos wo| averaged over the wo of each hemisphere), both relative to that configuration's mean
-    multiple scattering (over all its pairs) plus ``floor``. The energy term is there because an MAE fit of the
+@dataclasses.dataclass(frozen=True)
+class Loss:
+    """What ``lobe_loss`` weighs. ``floor``: added to each configuration's mean multiple scattering, which divides
+    its loss; ``energy_weight``: the weight of the energy term; ``scaled``: the lobe term compares the prediction
+    scaled, per wi and channel, to the Monte Carlo's energy there (at most ``MAX_SCALE`` times), i.e. the lobe's
+    shape as the add-on renders it for stacks that take the energy fraction, whose energy scale gives each view its
+    energy (``addon.bake.spongecake.fraction_limit``; by reciprocity the light's direction here, wo being uniform
+    over the sphere); the energy term then keeps the lobes' own energy, which stacks over a substrate render."""
+    floor: float = ENERGY_FLOOR
+    energy_weight: float = ENERGY_WEIGHT
+    scaled: bool = False
+
+
+def lobe_loss(net, data: dict, index, rng=None, wi_per_step: int | None = None, loss: Loss = Loss()) -> torch.Tensor:
+    """MAE of f |cos wo| per configuration, plus ``loss.energy_weight`` times the MAE of the energy each wi sends back
+    and through (f |cos wo| averaged over the wo of each hemisphere), both relative to that configuration's mean
+    multiple scattering (over all its pairs) plus ``loss.floor``. The energy term is there because an MAE fit of the
     lobe alone is the median, which ignores the narrow peaks of low-roughness flakes' multiple scattering (a few
     very large Monte Carlo values) and so under-predicts their energy; the error that matters is relative to each
     lobe, and the floor keeps configurations whose multiple scattering is negligible (mostly Monte Carlo noise)
@@ -206,22 +220,31 @@ def lobe_loss(net, data: dict, index, rng=None, wi_per_step: int | None = None,
     each configuration keeps that many of its wi, drawn at random (``some_wi``): an unbiased estimate of the loss
     at a fraction of the cost, every wi's energy term still exact."""
     batch = {k: data[k][index] for k in ("rows", "wi", "wo", "ms")}
-    norm = target(batch).mean(dim=(1, 2, 3)) + floor
+    norm = target(batch).mean(dim=(1, 2, 3)) + loss.floor
     if rng is not None:
         batch = augment(batch, rng)
         if wi_per_step:
             batch = some_wi(batch, wi_per_step, rng)
-    return batch_loss(net, batch, norm)
+    return batch_loss(net, batch, norm, loss)
 
 
-def batch_loss(net, batch: dict, norm: torch.Tensor) -> torch.Tensor:
+def batch_loss(net, batch: dict, norm: torch.Tensor, loss: Loss = Loss()) -> torch.Tensor:
     """``lobe_loss`` of a prepared batch, each configuration's loss divided by its ``norm``."""
     truth = target(batch)
     predicted = predicted_lobe(net, *tensors(batch))
-    lobe = (predicted - truth).abs().mean(dim=(1, 2, 3))
+    shaped = scaled_to(predicted, truth) if loss.scaled else predicted
+    lobe = (shaped - truth).abs().mean(dim=(1, 2, 3))
     down = torch.as_tensor(batch["wo"][:, None, :, 2:] < 0, device=DEVICE)
     energy = sum(((predicted - truth) * side).mean(dim=2).abs().mean(dim=(1, 2)) for side in (down, ~down))
-    return ((lobe + ENERGY_WEIGHT * energy) / norm).mean()
+    return ((lobe + loss.energy_weight * energy) / norm).mean()
+
+
+def scaled_to(predicted: torch.Tensor, truth: torch.Tensor) -> torch.Tensor:
+    """``predicted`` (B, n_wi, n_wo, 3) scaled per wi and channel to ``truth``'s energy (the mean over wo, uniform
+    over the sphere), by at most ``MAX_SCALE``."""
+    energy = predicted.mean(dim=2, keepdim=True)
+    scale = (truth.mean(dim=2, keepdim=True) / energy.clamp_min(1e-12)).clamp(max=MAX_SCALE)
+    return predicted * scale
 
 
 def some_wi(batch: dict, count: int, rng: np.random.Generator) -> dict:
@@ -286,11 +309,11 @@ def cosine_step(opt, loss, base_rate: float, frac: float) -> None:
 
 def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int = 32, init: mlp.MLP | None = None,
           log=print, area: bool = False, hidden: tuple = HIDDEN, wi_per_step: int | None = None,
-          floor: float = ENERGY_FLOOR):
+          loss: Loss = Loss()):
     """Train for ``minutes``, from ``make_network``'s start or, with ``init``, from an exported network
     (``warm_start``); returns the network at its best split-validation loss (checked every few seconds) and what
     happened. ``area``: the form with the area exponents (module docstring); ``hidden``: the hidden layers'
-    widths (a warm start takes its network's); ``wi_per_step`` and ``floor``: ``lobe_loss``'s. ``seed`` sets the
+    widths (a warm start takes its network's); ``wi_per_step`` and ``loss``: ``lobe_loss``'s. ``seed`` sets the
     start and the batches; the split into training and validation configurations is ``SPLIT_SEED``'s for every
     seed, so that runs compare on one split."""
     torch.manual_seed(seed)
@@ -309,23 +332,24 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
         epoch += 1
         shuffled = rng.permutation(train_idx)
         for i in range(0, len(shuffled), batch):
-            loss = lobe_loss(net, data, shuffled[i:i + batch], rng, wi_per_step, floor)
-            cosine_step(opt, loss, LEARNING_RATE, (time.time() - start) / budget)
+            step_loss = lobe_loss(net, data, shuffled[i:i + batch], rng, wi_per_step, loss)
+            cosine_step(opt, step_loss, LEARNING_RATE, (time.time() - start) / budget)
             step += 1
         if time.time() - last_check > min(5.0, budget / 20):
             last_check = time.time()
             with torch.no_grad():
-                val_loss = lobe_loss(net, data, val, floor=floor).item()
+                val_loss = lobe_loss(net, data, val, loss=loss).item()
             if val_loss < best[0]:
                 best = (val_loss, {k: v.clone() for k, v in net.state_dict().items()}, step)
             if time.time() - last_log > 30.0:
                 last_log = time.time()
-                log(f"  {n_layers} layer(s) epoch {epoch} step {step}: train loss {loss.item():.3e}, "
+                log(f"  {n_layers} layer(s) epoch {epoch} step {step}: train loss {step_loss.item():.3e}, "
                     f"validation loss {val_loss:.3e} (best {best[0]:.3e})  ({time.time() - start:.0f} s)", flush=True)
     if best[1] is not None:
         net.load_state_dict(best[1])
     return net, {"seed": seed, "epochs": epoch, "steps": step, "best_step": best[2], "batch": batch,
-                 "device": str(DEVICE), "wi_per_step": wi_per_step, "energy_floor": floor,
+                 "device": str(DEVICE), "wi_per_step": wi_per_step, "energy_floor": loss.floor,
+                 "energy_weight": loss.energy_weight, "scaled_loss": loss.scaled,
                  "precision": str(PRECISION).removeprefix("torch."), "seconds": round(time.time() - start, 1),
                  "train_configs": int(len(train_idx)), "split_validation_configs": int(n_val), "val_index": val}
 
@@ -437,7 +461,8 @@ def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path
         "paths_per_wi": metas[0]["paths"], "max_depth": metas[0]["max_depth"], "dataset_seed": metas[0]["seed"],
         "dataset_version": metas[0]["version"], "epochs": info["epochs"], "steps": info["steps"], "best_step": info["best_step"],
         "batch": info["batch"], "device": info["device"], "seed": info["seed"], "split_seed": SPLIT_SEED,
-        "wi_per_step": info["wi_per_step"], "energy_floor": info["energy_floor"], "precision": info["precision"],
+        "wi_per_step": info["wi_per_step"], "energy_floor": info["energy_floor"], "energy_weight": info["energy_weight"],
+        "scaled_loss": info["scaled_loss"], "precision": info["precision"],
         "dataset_worker_seconds": round(sum(m.get("seconds", 0.0) for m in metas)),
         "training_seconds": info["seconds"], "split_validation": split, "dataset_noise": dataset.noise(data),
         "date": datetime.date.today().isoformat(), "code_version": code_version(),
@@ -480,6 +505,10 @@ def main(argv=None) -> int:
                     "at random (all of them if not given): more steps in the same time")
     ap.add_argument("--energy-floor", type=float, default=ENERGY_FLOOR,
                     help="added to each configuration's mean multiple scattering in the loss's denominator")
+    ap.add_argument("--energy-weight", type=float, default=ENERGY_WEIGHT, help="the loss's energy term's weight")
+    ap.add_argument("--scaled-loss", action="store_true",
+                    help="compare the lobes' shape at the Monte Carlo's energy per wi, as the energy scale renders them "
+                         "(Loss.scaled)")
     ap.add_argument("--quick", action="store_true", help="a few seconds of training (tests)")
     ap.add_argument("--ensemble", type=Path, nargs="+", metavar="FOLDER",
                     help="write to --out the mean of the networks in these folders (``averaged``), scored, and stop")
@@ -517,7 +546,8 @@ def main(argv=None) -> int:
               flush=True)
         init = mlp.load(Path(a.init) / ms.weights_path(n_layers).name) if a.init else None
         net, info = train(data, n_layers, minutes, seed=a.seed, batch=4 if a.quick else a.batch, init=init,
-                          area=a.area, hidden=tuple(a.hidden), wi_per_step=a.wi_per_step, floor=a.energy_floor)
+                          area=a.area, hidden=tuple(a.hidden), wi_per_step=a.wi_per_step,
+                          loss=Loss(a.energy_floor, a.energy_weight, a.scaled_loss))
         if init is not None:
             info["init"] = {k: init.manifest.get(k) for k in ("training_configs", "steps", "training_seconds", "date",
                                                                "code_version", "held_out_validation", "outputs")}

@@ -24,18 +24,19 @@ THRESHOLDS = {
     # Regression bounds a little above what the shipped networks measure (docs/accuracy.md), not goals; where issue
     # 15's goal is met, the goal itself.
     # White furnace of non-absorbing stacks of 1-4 layers, SS + MS with the energy scale: mean and worst |1 - a| and
-    # the largest a. Issue 15's goal (3% / 10% / 1.005): 0.4% / 5.1% / 1.0032 measured (the network alone, without
-    # the scale: 11.5% / 91.6% / 1.92).
+    # the largest a. Issue 15's goal (3% / 10% / 1.005): 0.5% / 5.0% / 1.0037 measured (the network alone, without
+    # the scale: 12.2% / 117.4% / 2.17).
     "furnace_mean": 0.03,
     "furnace_worst": 0.10,
     "furnace_max": 1.005,
     # held-out validation set, with the energy scale: mean relative lobe error per layer count (no MS at all scores
-    # 1.0); measured 36.5% (1 layer) and 28.0% (2 layers); issue 15's goal is 25%
+    # 1.0); measured 36.5% (1 layer) and 26.2% (2 layers); issue 15's goal is 25%
     "validation_mean_lobe_error_1": 0.39,
-    "validation_mean_lobe_error_2": 0.31,
-    # the same for the network's lobes alone, before the energy scale: measured 39.2% and 30.5%
+    "validation_mean_lobe_error_2": 0.28,
+    # the same for the network's lobes alone, before the energy scale: measured 39.2% and 31.3% (the two-layer
+    # network is trained for the shape the energy scale renders: docs/training.md, the scaled loss)
     "validation_mean_network_lobe_error_1": 0.42,
-    "validation_mean_network_lobe_error_2": 0.33,
+    "validation_mean_network_lobe_error_2": 0.34,
     # rendered: SS + MS (network) vs Monte Carlo at most this times SS only vs Monte Carlo (presets, lit scenes)
     "rendered_ratio": 1.0,
 }
@@ -185,3 +186,24 @@ def test_rendered_ss_plus_ms_is_closer_to_monte_carlo_than_ss_alone(name):
         gt, s = single + truth["image"], truth["samples"]
         err_net, err_ss = metrics.rel_rmse(network, gt, s), metrics.rel_rmse(single, gt, s)
         assert err_net <= thresholds()["rendered_ratio"] * err_ss, (spec.name, err_net, err_ss)
+
+
+PRESET_SPHERE_GOAL = 0.08  # issue 15: the network's lobes against Monte Carlo on the fabric and window_shade spheres
+
+
+@trained
+def test_the_page_measures_the_shipped_networks_and_the_preset_spheres_meet_the_goal():
+    """docs/accuracy.md (``make bench``) was made with the shipped lobe networks (their training times, which the
+    page quotes from the manifests), and on it the reference with the network's lobes is within issue 15's goal on
+    the fabric and window_shade spheres."""
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "accuracy.md").read_text(encoding="utf-8")
+    section = page[page.index("### Rendered: SS + MS vs Monte Carlo on the presets"):]
+    for m in _manifests():
+        assert f"{m['training_seconds']} s)" in page, m["layers"]
+    header = next(line for line in section.splitlines() if line.startswith("| preset | scene |"))
+    column = [c.strip() for c in header.strip("|").split("|")].index("network")
+    for name in ("fabric", "window_shade"):
+        row = next(line for line in section.splitlines() if line.startswith(f"| {name} | sphere |"))
+        assert float([c.strip() for c in row.strip("|").split("|")][column].rstrip("%")) / 100 <= PRESET_SPHERE_GOAL

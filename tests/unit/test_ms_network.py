@@ -547,3 +547,28 @@ def test_the_cycles_forms_area_scale_along_the_normal_is_the_references():
     others = np.ones(ms.AREA.start, bool)
     others[ms.FORWARD_ALBEDO] = False
     np.testing.assert_array_equal(seen[:, others], weights[:, :ms.AREA.start][:, others])
+
+
+def test_the_scaled_loss_compares_the_lobes_shape_at_the_monte_carlo_energy():
+    """``--scaled-loss``: each wi's predicted lobe is scaled to the Monte Carlo's energy there before the lobe term, as
+    the energy fraction renders stacks without a substrate; a truth that is the prediction times a per-wi, per-channel
+    constant then costs nothing but the energy term, which the unscaled loss does not forgive."""
+    rng = np.random.default_rng(8)
+    n, n_wi, n_wo = 4, 4, 18
+    batch = {"rows": _rows(2, n), "wi": np.stack([dataset.stratified_hemisphere(rng, n_wi) for _ in range(n)]),
+             "wo": np.stack([dataset.stratified_sphere(rng, n_wo) for _ in range(n)])}
+    net = _random_network(2, area=True)
+    with torch.no_grad():
+        predicted = train.predicted_lobe(net, *(torch.as_tensor(batch[k]) for k in ("rows", "wi", "wo"))).numpy()
+    factor = rng.uniform(0.3, 3.0, (n, n_wi, 1, 3))
+    batch["ms"] = predicted * factor / np.abs(batch["wo"][:, None, :, 2:])
+    norm = torch.ones(n, dtype=torch.float64)
+    with torch.no_grad():
+        shape_only = train.batch_loss(net, batch, norm, train.Loss(energy_weight=0.0, scaled=True)).item()
+        unscaled = train.batch_loss(net, batch, norm, train.Loss(energy_weight=0.0)).item()
+        with_energy = train.batch_loss(net, batch, norm, train.Loss(energy_weight=1.0, scaled=True)).item()
+        scaled = train.scaled_to(torch.as_tensor(predicted), train.target(batch)).numpy()
+    assert shape_only == pytest.approx(0.0, abs=1e-12 * unscaled)
+    assert unscaled > 0.1 * np.mean(predicted)
+    assert with_energy > 0.1 * np.mean(predicted)
+    np.testing.assert_allclose(scaled.mean(axis=2), (predicted * factor).mean(axis=2), rtol=1e-10)
