@@ -168,13 +168,14 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
     assert train.main(["--rescore", "--training-form", "--layers", "1", "--out", str(weights), "--validation",
                        str(data_dir)]) == 0  # the same measure for both, to compare them
     assert mlp.load(weights / ms.weights_path(1).name).manifest["held_out_scored_by"] == "training form"
-    fast = tmp_path / "fast"  # float32, some wi per step, another floor: recorded in the manifest
+    fast = tmp_path / "fast"  # float32, some wi per step, another loss: recorded in the manifest
     monkeypatch.setattr(train, "PRECISION", train.PRECISION)  # main sets it for the process
     assert train.main(["--quick", "--data", str(data_dir), "--out", str(fast), "--validation", str(data_dir),
                        "--threads", "1", "--layers", "2", "--float32", "--wi-per-step", "2",
-                       "--energy-floor", "1e-4"]) == 0
+                       "--energy-floor", "1e-4", "--scaled-loss", "--energy-weight", "0.5"]) == 0
     manifest = mlp.load(fast / ms.weights_path(2).name).manifest
-    assert (manifest["precision"], manifest["wi_per_step"], manifest["energy_floor"]) == ("float32", 2, 1e-4)
+    assert ((manifest["precision"], manifest["wi_per_step"], manifest["energy_floor"], manifest["energy_weight"],
+             manifest["scaled_loss"]) == ("float32", 2, 1e-4, 0.5, True))
     assert np.isfinite(manifest["held_out_validation"]["mean_relative_lobe_error"])
     mlp.load.cache_clear()
     ms.predict.cache_clear()
