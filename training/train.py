@@ -47,7 +47,6 @@ WEIGHT_DECAY = 1e-4  # AdamW; a few thousand configurations per network: keep th
 SPLIT_SEED = 0  # which configurations are held out for split validation: the same whatever --seed
 ENERGY_WEIGHT = 2.0  # energy matters most in renders (and the furnace); see lobe_loss
 ENERGY_FLOOR = 1e-3  # about the median configuration's mean f |cos wo| of multiple scattering in the dataset
-MAX_SCALE = ms.MAX_SCALE  # the most the scaled loss may scale a wi's predicted lobe by (as the add-on's energy scale)
 VALIDATION_SET = Path(__file__).resolve().parents[1] / "tests" / "data" / "spongecake_ms_validation"
 DEVICE = torch.device("cpu")  # where training runs (``--device``); the exported weights are numpy either way
 PRECISION = torch.float64  # what training computes in (``--float32``); the exported weights are float32 either way
@@ -199,7 +198,7 @@ def predicted_lobe(net, rows: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor) 
 class Loss:
     """What ``lobe_loss`` weighs. ``floor``: added to each configuration's mean multiple scattering, which divides
     its loss; ``energy_weight``: the weight of the energy term; ``scaled``: the lobe term compares the prediction
-    scaled, per wi and channel, to the Monte Carlo's energy there (at most ``MAX_SCALE`` times), i.e. the lobe's
+    scaled, per wi and channel, to the Monte Carlo's energy there (``scaled_to``), i.e. the lobe's
     shape as the add-on renders it for stacks that take the energy fraction, whose energy scale gives each view its
     energy (``addon.bake.spongecake.fraction_limit``; by reciprocity the light's direction here, wo being uniform
     over the sphere); the energy term then keeps the lobes' own energy, which stacks over a substrate render."""
@@ -241,9 +240,9 @@ def batch_loss(net, batch: dict, norm: torch.Tensor, loss: Loss = Loss()) -> tor
 
 def scaled_to(predicted: torch.Tensor, truth: torch.Tensor) -> torch.Tensor:
     """``predicted`` (B, n_wi, n_wo, 3) scaled per wi and channel to ``truth``'s energy (the mean over wo, uniform
-    over the sphere), by at most ``MAX_SCALE``."""
+    over the sphere), by at most the add-on's energy scale's ``MAX_SCALE``."""
     energy = predicted.mean(dim=2, keepdim=True)
-    scale = (truth.mean(dim=2, keepdim=True) / energy.clamp_min(1e-12)).clamp(max=MAX_SCALE)
+    scale = (truth.mean(dim=2, keepdim=True) / energy.clamp_min(1e-12)).clamp(max=ms.MAX_SCALE)
     return predicted * scale
 
 
