@@ -122,7 +122,7 @@ assets: venv
 # grouped prediction): the lobes' and the energy fraction's.
 validation-set: venv
 	$(PY) -m training.dataset --out tests/data/spongecake_ms_validation --seed 1001 --layers 1 2 3 4 \
-		--configs 16 16 16 16 --shard 16 --paths 16000 --n-wi 9 --n-wo 72
+		--configs 64 64 16 16 --shard 16 --paths 16000 --n-wi 9 --n-wo 72
 	$(PY) -m training.energy_train --layers 1 2 3 4 --validation-set tests/data/spongecake_ms_energy_validation.npz
 
 extension: venv

@@ -114,11 +114,17 @@ def energy_network(n_layers: int) -> mlp.MLP:
     return mlp.load(energy_weights_path(n_layers))
 
 
+# A manifest's records of how its network scores (``train --rescore`` rewrites them): not what the network predicts.
+SCORE_RECORDS = ("held_out_validation", "held_out_per_config", "held_out_scored_by")
+
+
 def ms_identity(n_layers: int) -> list:
     """What a stack's multiple scattering comes from: the manifests of the networks that predict it (lobes and
-    energy fraction) and the version of what is made from the prediction (``MS_VERSION``, e.g. the energy scale);
-    part of bake keys and fit keys."""
-    return [network(n_layers).manifest, energy_network(n_layers).manifest, MS_VERSION]
+    energy fraction) without their ``SCORE_RECORDS``, and the version of what is made from the prediction
+    (``MS_VERSION``, e.g. the energy scale); part of bake keys and fit keys, so that scoring the same weights on
+    another held-out set asks for no re-bake and no refit."""
+    return [{k: v for k, v in net.manifest.items() if k not in SCORE_RECORDS}
+            for net in (network(n_layers), energy_network(n_layers))] + [MS_VERSION]
 
 
 # ------------------------------------------------------------------------------------------- encoding

@@ -59,7 +59,9 @@ def scored_lobes(data: dict):
 
 def lobe_errors(data: dict, predicted: np.ndarray | None = None) -> dict:
     """Per configuration, the relative L1 error of the predicted lobe (f |cos wo| summed over the stored pairs)
-    against Monte Carlo, its relative energy error, and the Monte Carlo noise's own relative L1 for scale.
+    against Monte Carlo, its relative energy error, and the Monte Carlo noise's own relative L1 for scale; the mean
+    lobe error's standard error (the configurations' spread over √count: how far the set's mean may lie from the
+    mean over all stacks the dataset draws).
     Configurations with less than 1e-3 of the largest multiple-scattering energy are left out of the means."""
     pred = predicted_lobes(data) if predicted is None else predicted
     truth, total, keep = scored_lobes(data)
@@ -67,6 +69,7 @@ def lobe_errors(data: dict, predicted: np.ndarray | None = None) -> dict:
     rel = np.abs(pred - truth).sum(axis=(1, 2, 3)) / safe
     energy = (pred.sum(axis=(1, 2, 3)) - total) / safe
     out = {"configs": int(keep.sum()), "mean_relative_lobe_error": float(rel[keep].mean()),
+           "standard_error_of_mean": float(rel[keep].std(ddof=1) / np.sqrt(keep.sum())) if keep.sum() > 1 else 0.0,
            "median_relative_lobe_error": float(np.median(rel[keep])),
            "worst_relative_lobe_error": float(rel[keep].max()),
            "mean_relative_energy_error": float(np.abs(energy[keep]).mean())}

@@ -573,3 +573,15 @@ def test_the_scaled_loss_compares_the_lobes_shape_at_the_monte_carlo_energy():
     assert unscaled > 0.1 * np.mean(predicted)
     assert with_energy > 0.1 * np.mean(predicted)
     np.testing.assert_allclose(scaled.mean(axis=2), (predicted * factor).mean(axis=2), rtol=1e-10)
+
+
+def test_scoring_a_network_again_asks_for_no_rebake(monkeypatch):
+    """Bake and fit keys hold what the networks predict from (``ms_identity``): a new held-out score in a manifest
+    (``train --rescore``) leaves them, a change of what the network was trained on does not."""
+    before = ms.ms_identity(2)
+    manifest = ms.network(2).manifest
+    monkeypatch.setitem(manifest, "held_out_validation", {"configs": 1, "mean_relative_lobe_error": 0.5})
+    monkeypatch.setitem(manifest, "held_out_per_config", [0.5])
+    assert ms.ms_identity(2) == before
+    monkeypatch.setitem(manifest, "steps", manifest["steps"] + 1)
+    assert ms.ms_identity(2) != before
