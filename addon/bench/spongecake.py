@@ -596,7 +596,7 @@ def ms_accuracy_markdown(sizes: MsSizes, samples: int, resolution: int) -> str:
               f"({sizes.returned_light_paths} paths per view; `validation.returned_light`), the energy itself, and "
               "that walk's own noise (the same measure, estimated from its two halves). The standard error of the "
               "mean (the configurations' spread over √count) says how far the set's mean may lie from the mean over "
-              "every stack the dataset draws: 16 configurations resolved about 5 points, 64 about 3. "
+              "every stack the dataset draws. "
               "Stacks of 3 and 4 layers go through the two-layer network, grouped (docs/training.md); their energy "
               "scale follows energy fraction networks of their own, as for 1 and 2 layers.",
               ""]
