@@ -306,6 +306,14 @@ def cosine_step(opt, loss, base_rate: float, frac: float) -> None:
     opt.step()
 
 
+def split(n_configs: int) -> tuple[np.ndarray, np.ndarray]:
+    """The configurations held out for split validation (10%, at least one) and those trained on: ``SPLIT_SEED``'s
+    permutation, the same for every run on a dataset of this size."""
+    order = np.random.default_rng(SPLIT_SEED).permutation(n_configs)
+    n_val = max(1, n_configs // 10)
+    return order[:n_val], order[n_val:]
+
+
 def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int = 32, init: mlp.MLP | None = None,
           log=print, area: bool = False, hidden: tuple = HIDDEN, wi_per_step: int | None = None,
           loss: Loss = Loss()):
@@ -317,9 +325,7 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
     seed, so that runs compare on one split."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    order = np.random.default_rng(SPLIT_SEED).permutation(len(data["rows"]))
-    n_val = max(1, len(order) // 10)
-    val, train_idx = order[:n_val], order[n_val:]
+    val, train_idx = split(len(data["rows"]))
     net = make_network(n_layers, area, hidden if init is None else init.hidden)
     if init is not None:
         warm_start(net, init)
@@ -350,7 +356,7 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
                  "device": str(DEVICE), "wi_per_step": wi_per_step, "energy_floor": loss.floor,
                  "energy_weight": loss.energy_weight, "scaled_loss": loss.scaled,
                  "precision": str(PRECISION).removeprefix("torch."), "seconds": round(time.time() - start, 1),
-                 "train_configs": int(len(train_idx)), "split_validation_configs": int(n_val), "val_index": val}
+                 "train_configs": int(len(train_idx)), "split_validation_configs": int(len(val)), "val_index": val}
 
 
 def record_held_out(path: Path, held_out: Path, training_form: bool = False) -> dict:

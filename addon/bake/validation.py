@@ -57,6 +57,14 @@ def scored_lobes(data: dict):
     return truth, total, total > 1e-3 * total.max()
 
 
+def monte_carlo_noise(data: dict) -> np.ndarray:
+    """Per configuration, the Monte Carlo lobe's own relative L1 noise: the standard errors of its stored pairs
+    (|a - b| / 2 of the walk's two halves, ``training.dataset``) times |cos wo|, summed, over the lobe's sum."""
+    _, total, _ = scored_lobes(data)
+    return (np.abs(data["ms_half_diff"]) * np.abs(data["wo"][:, None, :, 2:])).sum(axis=(1, 2, 3)) / np.maximum(
+        total, 1e-12)
+
+
 def lobe_errors(data: dict, predicted: np.ndarray | None = None) -> dict:
     """Per configuration, the relative L1 error of the predicted lobe (f |cos wo| summed over the stored pairs)
     against Monte Carlo, its relative energy error, and the Monte Carlo noise's own relative L1 for scale; the mean
@@ -74,8 +82,7 @@ def lobe_errors(data: dict, predicted: np.ndarray | None = None) -> dict:
            "worst_relative_lobe_error": float(rel[keep].max()),
            "mean_relative_energy_error": float(np.abs(energy[keep]).mean())}
     if "ms_half_diff" in data:  # a training pack (training.dataset.pack) leaves it out
-        noise = (np.abs(data["ms_half_diff"]) * np.abs(data["wo"][:, None, :, 2:])).sum(axis=(1, 2, 3)) / safe
-        out["mean_monte_carlo_noise"] = float(noise[keep].mean())
+        out["mean_monte_carlo_noise"] = float(monte_carlo_noise(data)[keep].mean())
     return {**out, "per_config": np.where(keep, rel, np.nan).tolist()}
 
 
