@@ -34,7 +34,7 @@ QUARTERS = 4
 def split_configurations(data: dict) -> dict:
     """The configurations ``train.split`` holds out of ``data``, in their stored order."""
     val = np.sort(train.split(len(data["rows"]))[0])
-    return {k: v[val] for k, v in data.items() if isinstance(v, np.ndarray) and len(v) == len(data["rows"])}
+    return {k: data[k][val] for k in validation.ARRAYS if k in data}  # a training pack has no ms_half_diff, ss
 
 
 def by_multiple_scattering(data: dict, per_config: np.ndarray, parts: int = QUARTERS) -> list:
@@ -49,7 +49,7 @@ def by_multiple_scattering(data: dict, per_config: np.ndarray, parts: int = QUAR
 def paired_difference(errors: np.ndarray, baseline: np.ndarray) -> dict:
     """Mean of ``errors - baseline`` over the configurations both score, and that mean's standard error."""
     diff = (errors - baseline)[np.isfinite(errors) & np.isfinite(baseline)]
-    return {"mean": float(diff.mean()), "standard_error": float(diff.std(ddof=1) / np.sqrt(len(diff)))}
+    return {"mean": float(diff.mean()), "standard_error": validation.standard_error(diff)}
 
 
 def split_unseen(net: mlp.MLP, n_data: int) -> bool:

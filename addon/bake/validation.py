@@ -57,6 +57,11 @@ def scored_lobes(data: dict):
     return truth, total, total > 1e-3 * total.max()
 
 
+def standard_error(values: np.ndarray) -> float:
+    """The standard error of ``values``' mean: their sample deviation over √count (0 for fewer than two)."""
+    return float(np.std(values, ddof=1) / np.sqrt(len(values))) if len(values) > 1 else 0.0
+
+
 def monte_carlo_noise(data: dict) -> np.ndarray:
     """Per configuration, the Monte Carlo lobe's own relative L1 noise: the standard errors of its stored pairs
     (|a - b| / 2 of the walk's two halves, ``training.dataset``) times |cos wo|, summed, over the lobe's sum."""
@@ -77,7 +82,7 @@ def lobe_errors(data: dict, predicted: np.ndarray | None = None) -> dict:
     rel = np.abs(pred - truth).sum(axis=(1, 2, 3)) / safe
     energy = (pred.sum(axis=(1, 2, 3)) - total) / safe
     out = {"configs": int(keep.sum()), "mean_relative_lobe_error": float(rel[keep].mean()),
-           "standard_error_of_mean": float(rel[keep].std(ddof=1) / np.sqrt(keep.sum())) if keep.sum() > 1 else 0.0,
+           "standard_error_of_mean": standard_error(rel[keep]),
            "median_relative_lobe_error": float(np.median(rel[keep])),
            "worst_relative_lobe_error": float(rel[keep].max()),
            "mean_relative_energy_error": float(np.abs(energy[keep]).mean())}
