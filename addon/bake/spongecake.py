@@ -361,9 +361,20 @@ class Prediction:
     forward_area_below: tuple
 
 
-@lru_cache(maxsize=256)
 def predict(params: model.Params) -> Prediction:
+    """The shipped network's prediction for the stack (cached per stack and weights folder, ``WEIGHTS``)."""
+    return _predict(params, str(WEIGHTS))
+
+
+@lru_cache(maxsize=256)
+def _predict(params: model.Params, weights: str) -> Prediction:
     return _prediction(*predict_rows(_both_sides(params)))
+
+
+def forget_networks() -> None:
+    """Drop the loaded networks and their cached predictions (after a weights file changed in place)."""
+    mlp.load.cache_clear()
+    _predict.cache_clear()
 
 
 def predict_with(net: mlp.MLP, params: model.Params) -> Prediction:

@@ -9,7 +9,6 @@ import pytest
 bpy = pytest.importorskip("bpy")
 pytest.importorskip("torch")
 
-from addon.bake import mlp  # noqa: E402
 from addon.bake import spongecake as ms  # noqa: E402
 from addon.nodes import predicted_image  # noqa: E402
 from addon.operators import bake_ops  # noqa: E402
@@ -32,11 +31,9 @@ def quick_weights(tmp_path, monkeypatch):
     for n_layers in range(1, ms.ENERGY_NETWORK_LAYERS + 1):  # trained apart (training.energy_train)
         shutil.copy(ms.energy_weights_path(n_layers), weights)
     monkeypatch.setattr(ms, "WEIGHTS", weights)
-    mlp.load.cache_clear()
-    ms.predict.cache_clear()
+    ms.forget_networks()
     yield weights
-    mlp.load.cache_clear()
-    ms.predict.cache_clear()
+    ms.forget_networks()
 
 
 def test_quick_train_export_load_bake_render(quick_weights, tmp_path):

@@ -75,7 +75,7 @@ def strong_network(monkeypatch):
 
 def _clear_caches():
     """The network's predictions and what is cached from them (per stack and weights folder, not per stand-in)."""
-    ms.predict.cache_clear()
+    ms.forget_networks()
     mapping._ms_values.cache_clear()
     mapping._budget_table.cache_clear()
 

@@ -57,8 +57,7 @@ def test_numpy_lobe_matches_the_differentiable_training_lobe(n_layers, area, mon
     exported = train.to_mlp(net, {})
     mlp.save(tmp_path / ms.weights_path(n_layers).name, exported.weights, exported.biases, {})
     monkeypatch.setattr(ms, "WEIGHTS", tmp_path)
-    mlp.load.cache_clear()
-    ms.predict.cache_clear()
+    ms.forget_networks()
     rng = np.random.default_rng(5)
     data = {"rows": _rows(n_layers, 6), "wi": np.stack([dataset.stratified_sphere(rng, 18) for _ in range(6)]),
             "wo": np.stack([dataset.stratified_hemisphere(rng, 16) for _ in range(6)])}  # viewer above (see eval_multiple)
@@ -70,8 +69,7 @@ def test_numpy_lobe_matches_the_differentiable_training_lobe(n_layers, area, mon
         torch_lobe = train.predicted_lobe(net32, *train.tensors(data)).numpy()
     data["ms"] = np.zeros(torch_lobe.shape)
     np.testing.assert_allclose(validation.predicted_lobes(data, energy=False), torch_lobe, rtol=1e-5, atol=1e-12)
-    mlp.load.cache_clear()
-    ms.predict.cache_clear()
+    ms.forget_networks()
 
 
 @pytest.mark.parametrize("n_layers", [1, 2])
@@ -105,8 +103,7 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
     for n_layers in range(1, ms.ENERGY_NETWORK_LAYERS + 1):  # trained apart (test_ms_energy_network.py)
         shutil.copy(ms.energy_weights_path(n_layers), weights)
     monkeypatch.setattr(ms, "WEIGHTS", weights)
-    mlp.load.cache_clear()
-    ms.predict.cache_clear()
+    ms.forget_networks()
     for n_layers in (1, 2):
         manifest = ms.network(n_layers).manifest
         assert manifest["layers"] == n_layers and manifest["training_configs"] > 0
@@ -177,8 +174,7 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
     assert ((manifest["precision"], manifest["wi_per_step"], manifest["energy_floor"], manifest["energy_weight"],
              manifest["scaled_loss"]) == ("float32", 2, 1e-4, 0.5, True))
     assert np.isfinite(manifest["held_out_validation"]["mean_relative_lobe_error"])
-    mlp.load.cache_clear()
-    ms.predict.cache_clear()
+    ms.forget_networks()
 
 
 @pytest.mark.parametrize("n_layers", [1, 2])

@@ -77,3 +77,15 @@ def test_the_noise_by_quarter_is_the_monte_carlo_noise_the_score_reports(two_lay
     noise = record["noise_by_multiple_scattering"]
     assert np.average(noise, weights=sizes) == pytest.approx(record["mean_monte_carlo_noise"])
     assert noise[0] > noise[-1]  # the least multiple scattering is the noisiest, relative to itself
+
+
+def test_with_the_energy_scale_a_network_scores_as_if_shipped_and_the_shipped_folder_stays():
+    data = {k: v[:2] for k, v in validation.load_shards(HELD_OUT, 1).items() if k != "meta"}
+    shipped_folder, shipped = ms.WEIGHTS, ms.network(1)
+    np.testing.assert_array_equal(compare.predicted_lobes(data, shipped, energy_scale=True),
+                                  validation.predicted_lobes(data))
+    other = nudged(shipped, 0.05)
+    scaled = compare.predicted_lobes(data, other, energy_scale=True)
+    assert ms.WEIGHTS == shipped_folder and np.array_equal(ms.network(1).biases[-1], shipped.biases[-1])
+    assert not np.allclose(scaled, validation.predicted_lobes(data))
+    assert not np.allclose(scaled, compare.predicted_lobes(data, other, energy_scale=False))  # the scale acts
