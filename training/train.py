@@ -6,7 +6,7 @@ two-layer network has 192),
 are then smooth (C-infinity) functions of the layer parameters, so texture-driven bakes vary smoothly between
 texels, and no unit dies on a small dataset. Loss: MAE between the Monte Carlo multiple-scattering lobe and
 W1 f_ss(params') + W2 / pi + f_ss(forward), both times |cos wo| (the differentiable ``training.spongecake_torch.eval_stack``),
-AdamW (weight decay 1e-4), learning rate 1e-3 with cosine decay, the checkpoint with the best split-validation
+AdamW (weight decay 1e-4), learning rate 1e-3 (``--learning-rate``) with cosine decay, the checkpoint with the best split-validation
 loss kept, mini-batches of 32 configurations (every direction pair of a
 configuration in the same batch). 10% of the configurations are held out for validation (the same ones for every ``--seed``: ``SPLIT_SEED``); the shipped,
 independently seeded validation set (tests/data) is scored at export and its errors go into the manifest.
@@ -316,12 +316,13 @@ def split(n_configs: int) -> tuple[np.ndarray, np.ndarray]:
 
 def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int = 32, init: mlp.MLP | None = None,
           log=print, area: bool = False, hidden: tuple = HIDDEN, wi_per_step: int | None = None,
-          loss: Loss = Loss()):
+          loss: Loss = Loss(), learning_rate: float = LEARNING_RATE):
     """Train for ``minutes``, from ``make_network``'s start or, with ``init``, from an exported network
     (``warm_start``); returns the network at its best split-validation loss (checked every few seconds) and what
     happened. ``area``: the form with the area exponents (module docstring); ``hidden``: the hidden layers'
-    widths (a warm start takes its network's); ``wi_per_step`` and ``loss``: ``lobe_loss``'s. ``seed`` sets the
-    start and the batches; the split into training and validation configurations is ``SPLIT_SEED``'s for every
+    widths (a warm start takes its network's); ``wi_per_step`` and ``loss``: ``lobe_loss``'s; ``learning_rate``:
+    where the cosine decay starts (a warm start may start lower, to keep what its network learned). ``seed`` sets
+    the start and the batches; the split into training and validation configurations is ``SPLIT_SEED``'s for every
     seed, so that runs compare on one split."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
@@ -329,7 +330,7 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
     net = make_network(n_layers, area, hidden if init is None else init.hidden)
     if init is not None:
         warm_start(net, init)
-    opt = torch.optim.AdamW(net.parameters(), lr=LEARNING_RATE, weight_decay=WEIGHT_DECAY)
+    opt = torch.optim.AdamW(net.parameters(), lr=learning_rate, weight_decay=WEIGHT_DECAY)
     start, step, epoch, last_check, last_log = time.time(), 0, 0, -math.inf, -math.inf
     best = (math.inf, None, 0)
     budget = minutes * 60.0
@@ -338,7 +339,7 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
         shuffled = rng.permutation(train_idx)
         for i in range(0, len(shuffled), batch):
             step_loss = lobe_loss(net, data, shuffled[i:i + batch], rng, wi_per_step, loss)
-            cosine_step(opt, step_loss, LEARNING_RATE, (time.time() - start) / budget)
+            cosine_step(opt, step_loss, learning_rate, (time.time() - start) / budget)
             step += 1
         if time.time() - last_check > min(5.0, budget / 20):
             last_check = time.time()
@@ -354,7 +355,7 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
         net.load_state_dict(best[1])
     return net, {"seed": seed, "epochs": epoch, "steps": step, "best_step": best[2], "batch": batch,
                  "device": str(DEVICE), "wi_per_step": wi_per_step, "energy_floor": loss.floor,
-                 "energy_weight": loss.energy_weight, "scaled_loss": loss.scaled,
+                 "energy_weight": loss.energy_weight, "scaled_loss": loss.scaled, "learning_rate": learning_rate,
                  "precision": str(PRECISION).removeprefix("torch."), "seconds": round(time.time() - start, 1),
                  "train_configs": int(len(train_idx)), "split_validation_configs": int(len(val)), "val_index": val}
 
@@ -467,7 +468,7 @@ def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path
         "dataset_version": metas[0]["version"], "epochs": info["epochs"], "steps": info["steps"], "best_step": info["best_step"],
         "batch": info["batch"], "device": info["device"], "seed": info["seed"], "split_seed": SPLIT_SEED,
         "wi_per_step": info["wi_per_step"], "energy_floor": info["energy_floor"], "energy_weight": info["energy_weight"],
-        "scaled_loss": info["scaled_loss"], "precision": info["precision"],
+        "scaled_loss": info["scaled_loss"], "learning_rate": info["learning_rate"], "precision": info["precision"],
         "dataset_worker_seconds": round(sum(m.get("seconds", 0.0) for m in metas)),
         "training_seconds": info["seconds"], "split_validation": split, "dataset_noise": dataset.noise(data),
         "date": datetime.date.today().isoformat(), "code_version": code_version(),
@@ -511,6 +512,8 @@ def main(argv=None) -> int:
     ap.add_argument("--energy-floor", type=float, default=ENERGY_FLOOR,
                     help="added to each configuration's mean multiple scattering in the loss's denominator")
     ap.add_argument("--energy-weight", type=float, default=ENERGY_WEIGHT, help="the loss's energy term's weight")
+    ap.add_argument("--learning-rate", type=float, default=LEARNING_RATE,
+                    help="the cosine decay's starting rate (lower keeps more of a warm start's network)")
     ap.add_argument("--scaled-loss", action="store_true",
                     help="compare the lobes' shape at the Monte Carlo's energy per wi, as the energy scale renders them "
                          "(Loss.scaled)")
@@ -552,7 +555,7 @@ def main(argv=None) -> int:
         init = mlp.load(Path(a.init) / ms.weights_path(n_layers).name) if a.init else None
         net, info = train(data, n_layers, minutes, seed=a.seed, batch=4 if a.quick else a.batch, init=init,
                           area=a.area, hidden=tuple(a.hidden), wi_per_step=a.wi_per_step,
-                          loss=Loss(a.energy_floor, a.energy_weight, a.scaled_loss))
+                          loss=Loss(a.energy_floor, a.energy_weight, a.scaled_loss), learning_rate=a.learning_rate)
         if init is not None:
             info["init"] = {k: init.manifest.get(k) for k in ("training_configs", "steps", "training_seconds", "date",
                                                                "code_version", "held_out_validation", "outputs")}

@@ -169,10 +169,11 @@ def test_quick_dataset_train_export_load(tmp_path, monkeypatch):
     monkeypatch.setattr(train, "PRECISION", train.PRECISION)  # main sets it for the process
     assert train.main(["--quick", "--data", str(data_dir), "--out", str(fast), "--validation", str(data_dir),
                        "--threads", "1", "--layers", "2", "--float32", "--wi-per-step", "2",
-                       "--energy-floor", "1e-4", "--scaled-loss", "--energy-weight", "0.5"]) == 0
+                       "--energy-floor", "1e-4", "--scaled-loss", "--energy-weight", "0.5",
+                       "--learning-rate", "3e-4"]) == 0
     manifest = mlp.load(fast / ms.weights_path(2).name).manifest
     assert ((manifest["precision"], manifest["wi_per_step"], manifest["energy_floor"], manifest["energy_weight"],
-             manifest["scaled_loss"]) == ("float32", 2, 1e-4, 0.5, True))
+             manifest["scaled_loss"], manifest["learning_rate"]) == ("float32", 2, 1e-4, 0.5, True, 3e-4))
     assert np.isfinite(manifest["held_out_validation"]["mean_relative_lobe_error"])
     ms.forget_networks()
 
