@@ -16,6 +16,7 @@ set (``--held-out``: 64 stacks, about 12 minutes a network) better than the spli
 
     python -m training.compare --layers 2 addon/bake/weights ~/.cache/lamina/experiments/2layer-4x256
     python -m training.compare --layers 1 --held-out addon/bake/weights <folder>   # the shipped held-out set
+    python -m training.compare --layers 2 --trained-on addon/bake/weights   # as many configurations it trained on
 
 A network whose manifest says it trained on another number of configurations than the split leaves may have seen
 part of the split: its line says ``"split_unseen": false``.
@@ -38,10 +39,12 @@ from training import dataset, train
 QUARTERS = 4
 
 
-def split_configurations(data: dict) -> dict:
-    """The configurations ``train.split`` holds out of ``data``, in their stored order."""
-    val = np.sort(train.split(len(data["rows"]))[0])
-    return {k: data[k][val] for k in validation.ARRAYS if k in data}  # a training pack has no ms_half_diff, ss
+def split_configurations(data: dict, trained_on: bool = False) -> dict:
+    """The configurations ``train.split`` holds out of ``data``, in their stored order; with ``trained_on``, as many
+    of those it trains on (the first in stored order), to set a network's error where it trained beside the split's."""
+    val, trained = train.split(len(data["rows"]))
+    picked = np.sort(trained)[:len(val)] if trained_on else np.sort(val)
+    return {k: data[k][picked] for k in validation.ARRAYS if k in data}  # a training pack has no ms_half_diff, ss
 
 
 def by_multiple_scattering(data: dict, per_config: np.ndarray, parts: int = QUARTERS) -> list:
@@ -117,7 +120,10 @@ def main(argv=None) -> int:
     ap.add_argument("folders", type=Path, nargs="+", help="weights folders; the first is the baseline")
     ap.add_argument("--layers", type=int, default=2, choices=[1, 2])
     ap.add_argument("--data", type=Path, default=dataset.DEFAULT_CACHE, help="the training dataset (its split)")
-    ap.add_argument("--held-out", action="store_true", help="score on the shipped held-out set instead of the split")
+    where = ap.add_mutually_exclusive_group()
+    where.add_argument("--held-out", action="store_true", help="score on the shipped held-out set instead of the split")
+    where.add_argument("--trained-on", action="store_true",
+                       help="score on as many configurations the split trains on instead (the first, stored order)")
     ap.add_argument("--energy-scale", action="store_true",
                     help="score with the energy scale, as the add-on renders stacks without a substrate (slow)")
     a = ap.parse_args(argv)
@@ -130,9 +136,10 @@ def main(argv=None) -> int:
         data, n_data = validation.load_shards(train.VALIDATION_SET, a.layers), None
     else:
         full = dataset.load(a.data, a.layers)
-        data, n_data = split_configurations(full), len(full["rows"])
+        data, n_data = split_configurations(full, a.trained_on), len(full["rows"])
+    where = "held out" if a.held_out else "trained on" if a.trained_on else "split"
     for path, record in zip(paths, compare(data, [mlp.load(p) for p in paths], n_data, a.energy_scale)):
-        print(json.dumps({"network": str(path), "set": "held out" if a.held_out else "split",
+        print(json.dumps({"network": str(path), "set": where,
                           "energy_scale": a.energy_scale, **record}), flush=True)
     return 0
 

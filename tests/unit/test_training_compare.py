@@ -52,6 +52,9 @@ def test_the_split_is_what_training_holds_out_and_says_who_saw_it(two_layer):
     held = compare.split_configurations(two_layer)
     assert len(held["rows"]) == len(val) and not set(val) & set(trained_on)
     assert np.array_equal(held["ms"], two_layer["ms"][np.sort(val)])
+    seen = compare.split_configurations(two_layer, trained_on=True)
+    assert len(seen["rows"]) == len(val)
+    assert np.array_equal(seen["ms"], two_layer["ms"][np.sort(trained_on)[:len(val)]])
     net = ms.network(2)
     for configs, unseen in ((len(trained_on), True), (len(trained_on) + 1, False), (None, False)):
         manifest = {k: v for k, v in net.manifest.items() if k != "training_configs"}
@@ -66,6 +69,8 @@ def test_the_command_prints_one_line_per_network_and_refuses_a_missing_one(tmp_p
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert [line["set"] for line in lines] == ["split", "split"] and lines[1]["minus_first"]["mean"] == 0.0
     assert lines[0]["split_unseen"] is False  # the shipped network did not train on this set's other 90%
+    assert compare.main(["--layers", "1", "--data", str(HELD_OUT), "--trained-on", str(shipped)]) == 0
+    assert json.loads(capsys.readouterr().out)["set"] == "trained on"
     assert compare.main(["--layers", "1", "--held-out", str(tmp_path)]) == 2
     assert "no 1-layer network in" in capsys.readouterr().err
 
