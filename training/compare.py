@@ -19,7 +19,8 @@ set (``--held-out``: 64 stacks, about 12 minutes a network) better than the spli
     python -m training.compare --layers 2 --trained-on addon/bake/weights   # as many configurations it trained on
 
 A network whose manifest says it trained on another number of configurations than the split leaves may have seen
-part of the split: its line says ``"split_unseen": false``.
+part of the split: its line says ``"split_unseen": false`` (with ``--trained-on``, true says that it trained on the
+configurations scored).
 """
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ import argparse
 import json
 import sys
 import tempfile
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -94,12 +96,12 @@ def predicted_lobes(data: dict, net: mlp.MLP, energy_scale: bool) -> np.ndarray:
         return validation.predicted_lobes(data)
 
 
-def compare(data: dict, nets: list, n_data: int | None = None, energy_scale: bool = False) -> list:
-    """One record per network of ``nets`` (``mlp.MLP``) on ``data``: ``validation.lobe_errors``' summary, the mean
-    error (and noise) by quarter of multiple scattering, the paired difference to the first network, and (given the
-    size of the dataset the split came from, ``n_data``) whether the split is unseen by it; with ``energy_scale``,
-    each network's lobes with the energy scale (``predicted_lobes``)."""
-    records, baseline = [], None
+def compare(data: dict, nets: list, n_data: int | None = None, energy_scale: bool = False) -> Iterator[dict]:
+    """One record per network of ``nets`` (``mlp.MLP``) on ``data``, yielded as each is scored:
+    ``validation.lobe_errors``' summary, the mean error (and noise) by quarter of multiple scattering, the paired
+    difference to the first network, and (given the size of the dataset the split came from, ``n_data``) whether the
+    split is unseen by it; with ``energy_scale``, each network's lobes with the energy scale (``predicted_lobes``)."""
+    baseline = None
     for net in nets:
         scores = validation.lobe_errors(data, predicted_lobes(data, net, energy_scale))
         per_config = np.asarray(scores.pop("per_config"), dtype=float)
@@ -111,8 +113,7 @@ def compare(data: dict, nets: list, n_data: int | None = None, energy_scale: boo
         if n_data is not None:
             record["split_unseen"] = split_unseen(net, n_data)
         baseline = per_config if baseline is None else baseline
-        records.append(record)
-    return records
+        yield record
 
 
 def main(argv=None) -> int:
@@ -120,9 +121,10 @@ def main(argv=None) -> int:
     ap.add_argument("folders", type=Path, nargs="+", help="weights folders; the first is the baseline")
     ap.add_argument("--layers", type=int, default=2, choices=[1, 2])
     ap.add_argument("--data", type=Path, default=dataset.DEFAULT_CACHE, help="the training dataset (its split)")
-    where = ap.add_mutually_exclusive_group()
-    where.add_argument("--held-out", action="store_true", help="score on the shipped held-out set instead of the split")
-    where.add_argument("--trained-on", action="store_true",
+    which_set = ap.add_mutually_exclusive_group()
+    which_set.add_argument("--held-out", action="store_true",
+                           help="score on the shipped held-out set instead of the split")
+    which_set.add_argument("--trained-on", action="store_true",
                        help="score on as many configurations the split trains on instead (the first, stored order)")
     ap.add_argument("--energy-scale", action="store_true",
                     help="score with the energy scale, as the add-on renders stacks without a substrate (slow)")
