@@ -36,18 +36,29 @@ def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward
     network has none); ``area`` (and so the forward lobe) adds one exponent per layer (``train.area_scale``), started
     from the shipped network's or ``train.AREA_START``."""
     forward = forward or area
-    rows, wi, wo = train.tensors(data)
-    truth = train.target(data)
-    total = truth.sum(dim=(1, 2, 3)).clamp_min(1e-12)
-    start = ms.network(rows.shape[1])(ms.features(data["rows"].astype(np.float64)))
+    rows = data["rows"]
+    start = ms.network(rows.shape[1])(ms.features(rows.astype(np.float64)))
     plain, with_forward, with_area = ms.output_widths(rows.shape[1])
     if start.shape[1] == plain:
         start = np.concatenate([start, np.tile(train.FORWARD_START, (len(start), 1))], axis=1)
     if start.shape[1] == with_forward:
         start = np.concatenate([start, np.full((len(start), rows.shape[1]), train.AREA_START)], axis=1)
     width = with_area if area else with_forward if forward else plain
-    raw = torch.tensor(start[:, :width], dtype=torch.float64, requires_grad=True)
+    raw = best_outputs(data, start[:, :width], steps, rate, energy)
+    with torch.no_grad():
+        return train.predicted_lobe(lambda x: raw, *train.tensors(data)).cpu().numpy()
 
+
+def best_outputs(data: dict, start: np.ndarray, steps: int, rate: float, energy: float = 0.0,
+                 scaled: float = 0.0) -> torch.Tensor:
+    """The network outputs (C, width) that minimise each configuration's score, started from ``start``: Adam with a
+    cosine decay from ``rate``, on the relative L1 error of f |cos wo| (``validation.lobe_errors``), plus ``energy``
+    times the relative error of its energy and ``scaled`` times the relative L1 error of the lobes scaled to the
+    Monte Carlo's energy per wi and channel (``train.scaled_to``: the shape the energy scale renders)."""
+    rows, wi, wo = train.tensors(data)
+    truth = train.target(data)
+    total = truth.sum(dim=(1, 2, 3)).clamp_min(1e-12)
+    raw = torch.tensor(start, dtype=truth.dtype, device=truth.device, requires_grad=True)
     opt = torch.optim.Adam([raw], lr=rate)
     for step in range(steps):
         for group in opt.param_groups:
@@ -55,12 +66,13 @@ def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward
         predicted = train.predicted_lobe(lambda x: raw, rows, wi, wo)
         lobe = (predicted - truth).abs().sum(dim=(1, 2, 3)) / total
         gained = (predicted.sum(dim=(1, 2, 3)) - truth.sum(dim=(1, 2, 3))).abs() / total
-        loss = (lobe + energy * gained).sum()
+        loss = lobe + energy * gained
+        if scaled:
+            loss = loss + scaled * (train.scaled_to(predicted, truth) - truth).abs().sum(dim=(1, 2, 3)) / total
         opt.zero_grad()
-        loss.backward()
+        loss.sum().backward()
         opt.step()
-    with torch.no_grad():
-        return train.predicted_lobe(lambda x: raw, rows, wi, wo).cpu().numpy()
+    return raw.detach()
 
 
 CONE = 0.9  # cos 25.8°: the cones around the light's own direction and its mirror image in ``regions``

@@ -330,6 +330,20 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
     net = make_network(n_layers, area, hidden if init is None else init.hidden)
     if init is not None:
         warm_start(net, init)
+    run = optimise(net, train_idx, lambda index: lobe_loss(net, data, index, rng, wi_per_step, loss),
+                   lambda: lobe_loss(net, data, val, loss=loss).item(), minutes, batch, learning_rate, rng,
+                   lambda text: log(f"  {n_layers} layer(s) {text}", flush=True))
+    return net, {"seed": seed, **run, "batch": batch, "device": str(DEVICE), "wi_per_step": wi_per_step,
+                 "energy_floor": loss.floor, "energy_weight": loss.energy_weight, "scaled_loss": loss.scaled,
+                 "learning_rate": learning_rate, "precision": str(PRECISION).removeprefix("torch."),
+                 "train_configs": int(len(train_idx)), "split_validation_configs": int(len(val)), "val_index": val}
+
+
+def optimise(net, train_idx: np.ndarray, step_loss, check_loss, minutes: float, batch: int, learning_rate: float,
+             rng: np.random.Generator, log) -> dict:
+    """AdamW on ``net`` for ``minutes``: epochs of shuffled mini-batches of ``train_idx`` (``step_loss(index)``),
+    the learning rate in cosine decay from ``learning_rate``, ``check_loss()`` every few seconds; ``net`` ends at
+    the state of its best check. Returns what happened (epochs, steps, the best check's step, seconds)."""
     opt = torch.optim.AdamW(net.parameters(), lr=learning_rate, weight_decay=WEIGHT_DECAY)
     start, step, epoch, last_check, last_log = time.time(), 0, 0, -math.inf, -math.inf
     best = (math.inf, None, 0)
@@ -338,26 +352,22 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
         epoch += 1
         shuffled = rng.permutation(train_idx)
         for i in range(0, len(shuffled), batch):
-            step_loss = lobe_loss(net, data, shuffled[i:i + batch], rng, wi_per_step, loss)
-            cosine_step(opt, step_loss, learning_rate, (time.time() - start) / budget)
+            step_loss_value = step_loss(shuffled[i:i + batch])
+            cosine_step(opt, step_loss_value, learning_rate, (time.time() - start) / budget)
             step += 1
         if time.time() - last_check > min(5.0, budget / 20):
             last_check = time.time()
             with torch.no_grad():
-                val_loss = lobe_loss(net, data, val, loss=loss).item()
-            if val_loss < best[0]:
-                best = (val_loss, {k: v.clone() for k, v in net.state_dict().items()}, step)
+                check = check_loss()
+            if check < best[0]:
+                best = (check, {k: v.clone() for k, v in net.state_dict().items()}, step)
             if time.time() - last_log > 30.0:
                 last_log = time.time()
-                log(f"  {n_layers} layer(s) epoch {epoch} step {step}: train loss {step_loss.item():.3e}, "
-                    f"validation loss {val_loss:.3e} (best {best[0]:.3e})  ({time.time() - start:.0f} s)", flush=True)
+                log(f"epoch {epoch} step {step}: train loss {step_loss_value.item():.3e}, validation loss "
+                    f"{check:.3e} (best {best[0]:.3e})  ({time.time() - start:.0f} s)")
     if best[1] is not None:
         net.load_state_dict(best[1])
-    return net, {"seed": seed, "epochs": epoch, "steps": step, "best_step": best[2], "batch": batch,
-                 "device": str(DEVICE), "wi_per_step": wi_per_step, "energy_floor": loss.floor,
-                 "energy_weight": loss.energy_weight, "scaled_loss": loss.scaled, "learning_rate": learning_rate,
-                 "precision": str(PRECISION).removeprefix("torch."), "seconds": round(time.time() - start, 1),
-                 "train_configs": int(len(train_idx)), "split_validation_configs": int(len(val)), "val_index": val}
+    return {"epochs": epoch, "steps": step, "best_step": best[2], "seconds": round(time.time() - start, 1)}
 
 
 def record_held_out(path: Path, held_out: Path, training_form: bool = False) -> dict:
