@@ -86,11 +86,16 @@ def load_fits(folder: Path, n_layers: int) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate([c["index"] for c in chunks]), np.concatenate([c["raw"] for c in chunks])
 
 
-def regress(data: dict, index: np.ndarray, raw: np.ndarray, init: mlp.MLP, minutes: float, seed: int = 0,
-            batch: int = 64, learning_rate: float = 3e-4, log=print):
-    """``init`` trained for ``minutes`` on the mean squared error of its raw outputs against ``raw`` for
-    ``index``'s configurations; returns the network at its best loss on a tenth of them held back, and what
-    happened (``train.export``'s record; its split is ``train.split``'s, none of which is fitted)."""
+TARGETS = ("outputs", "lobes")  # what ``regress`` compares with the fits'
+
+
+def regress(data: dict, index: np.ndarray, raw: np.ndarray, init: mlp.MLP, minutes: float, target: str = "lobes",
+            seed: int = 0, batch: int = 32, learning_rate: float = 3e-4, log=print):
+    """``init`` trained for ``minutes`` towards the fits ``raw`` of ``index``'s configurations: on the mean squared
+    error of its raw outputs (``target`` "outputs"), or on the relative L1 distance of its lobes to the fits' lobes
+    ("lobes": outputs the lobes do not depend on are left free); returns the network at its best loss on a tenth of
+    them held back, and what happened (``train.export``'s record; its split is ``train.split``'s, none of which is
+    fitted)."""
     if len(index) < 10:
         raise ValueError(f"{len(index)} fits are too few to hold a tenth of them back")
     torch.manual_seed(seed)
@@ -98,21 +103,35 @@ def regress(data: dict, index: np.ndarray, raw: np.ndarray, init: mlp.MLP, minut
     n_layers = data["rows"].shape[1]
     net = train.make_network(n_layers, raw.shape[1] > train.outputs(n_layers), init.hidden)
     train.warm_start(net, init)
-    x = torch.as_tensor(ms.features(data["rows"][index].astype(np.float64)), dtype=train.PRECISION)
+    fitted = {k: data[k][index] for k in ("rows", "wi", "wo", "ms")}
+    x = torch.as_tensor(ms.features(fitted["rows"].astype(np.float64)), dtype=train.PRECISION)
     y = torch.as_tensor(raw, dtype=train.PRECISION)
+    if target == "lobes":
+        goal = torch.cat([fit_lobes(fitted, y, part) for part in np.array_split(np.arange(len(index)),
+                                                                                 max(1, len(index) // CHUNK))])
+        total = train.target(fitted).sum(dim=(1, 2, 3)).clamp_min(1e-12)
+
+        def distance(rows):
+            lobes = train.predicted_lobe(net, *train.tensors({k: v[rows] for k, v in fitted.items()}))
+            return ((lobes - goal[rows]).abs().sum(dim=(1, 2, 3)) / total[rows]).mean()
+    else:
+        def distance(rows):
+            return ((net(x[rows]) - y[rows]) ** 2).mean()
     held_back = np.arange(len(index)) % 10 == 0
-
-    def squared_error(rows):
-        return ((net(x[rows]) - y[rows]) ** 2).mean()
-
-    run = train.optimise(net, np.flatnonzero(~held_back), squared_error,
-                         lambda: squared_error(np.flatnonzero(held_back)).item(), minutes, batch, learning_rate, rng,
+    run = train.optimise(net, np.flatnonzero(~held_back), distance,
+                         lambda: distance(np.flatnonzero(held_back)).item(), minutes, batch, learning_rate, rng,
                          lambda text: log(f"  {text}", flush=True))
     val, _ = train.split(len(data["rows"]))
     return net, {"seed": seed, **run, "batch": batch, "device": str(train.DEVICE), "wi_per_step": None,
                  "energy_floor": None, "energy_weight": None, "scaled_loss": False, "learning_rate": learning_rate,
                  "precision": str(train.PRECISION).removeprefix("torch."), "train_configs": int(len(index)),
-                 "split_validation_configs": int(len(val)), "val_index": val}
+                 "distilled_from": target, "split_validation_configs": int(len(val)), "val_index": val}
+
+
+def fit_lobes(fitted: dict, raw: torch.Tensor, part: np.ndarray) -> torch.Tensor:
+    """The lobes (f |cos wo|) of the fits ``raw`` for the configurations ``part`` of ``fitted``."""
+    with torch.no_grad():
+        return train.predicted_lobe(lambda _: raw[part], *train.tensors({k: v[part] for k, v in fitted.items()}))
 
 
 def scores(data: dict, index: np.ndarray, outputs: list) -> list[dict]:
@@ -145,6 +164,8 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=FIT_STEPS, help="fit: optimiser steps per chunk")
     ap.add_argument("--scaled", type=float, default=1.0, help="fit: weight of the scaled lobes' score")
     ap.add_argument("--fits", type=Path, help="train: the fits' folder")
+    ap.add_argument("--target", choices=TARGETS, default="lobes",
+                    help="train: regress the raw outputs (mean squared error) or the lobes (relative L1) on the fits'")
     ap.add_argument("--init", type=Path, default=ms.WEIGHTS, help="train: the weights folder to start from")
     ap.add_argument("--minutes", type=float, default=20.0)
     ap.add_argument("--learning-rate", type=float, default=3e-4)
@@ -171,7 +192,7 @@ def main(argv=None) -> int:
             print(json.dumps({"lobes": name, **record}), flush=True)
         return 0
     init = mlp.load(a.init / ms.weights_path(a.layers).name)
-    net, info = regress(data, index, raw, init, a.minutes, learning_rate=a.learning_rate)
+    net, info = regress(data, index, raw, init, a.minutes, a.target, learning_rate=a.learning_rate)
     info["init"] = {k: init.manifest.get(k) for k in ("training_configs", "steps", "date", "code_version")}
     train.export(net, info, data, a.layers, a.out, train.VALIDATION_SET)
     return 0

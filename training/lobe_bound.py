@@ -9,6 +9,7 @@ bound is the lobe form's own (issue 15's goal of 25% mean lobe error is measured
     python -m training.lobe_bound --forward  # with the forward lobe (an HG layer's single scattering)
     python -m training.lobe_bound --forward --breakdown  # and where, by direction, each error lies
     python -m training.lobe_bound --area     # the forward lobe scaled by the layers' projected areas
+    python -m training.lobe_bound --area --folds 3  # cross-validated over wi: each scored by a fit that never saw it
 
 The loss is the score itself: the relative L1 error of f |cos wo| over each configuration's stored pairs
 (``validation.lobe_errors``), optionally plus ``--energy`` times the relative error of its energy (the training
@@ -30,11 +31,14 @@ from training import train
 
 
 def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward: bool = False,
-               area: bool = False) -> np.ndarray:
+               area: bool = False, folds: int = 1) -> np.ndarray:
     """f |cos wo| (C, n_wi, n_wo, 3) of the lobe form, with the forward lobe or without, with its outputs optimised
     per configuration (started from the shipped network's; the forward lobe's from ``train.FORWARD_START`` where that
     network has none); ``area`` (and so the forward lobe) adds one exponent per layer (``train.area_scale``), started
-    from the shipped network's or ``train.AREA_START``."""
+    from the shipped network's or ``train.AREA_START``. With ``folds`` > 1 the fit is cross-validated over the
+    light's directions: each configuration's wi are dealt into ``folds`` groups (wi k into group k % folds), and each
+    group's lobes come from the outputs fitted to the other groups' wi, so that the score says what the form reaches
+    at directions it was not fitted to (``fold_of``)."""
     forward = forward or area
     rows = data["rows"]
     start = ms.network(rows.shape[1])(ms.features(rows.astype(np.float64)))
@@ -44,9 +48,28 @@ def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward
     if start.shape[1] == with_forward:
         start = np.concatenate([start, np.full((len(start), rows.shape[1]), train.AREA_START)], axis=1)
     width = with_area if area else with_forward if forward else plain
-    raw = best_outputs(data, start[:, :width], steps, rate, energy)
-    with torch.no_grad():
-        return train.predicted_lobe(lambda x: raw, *train.tensors(data)).cpu().numpy()
+    if folds == 1:
+        raw = best_outputs(data, start[:, :width], steps, rate, energy)
+        with torch.no_grad():
+            return train.predicted_lobe(lambda x: raw, *train.tensors(data)).cpu().numpy()
+    out = np.zeros(data["ms"].shape)
+    group = fold_of(data["wi"].shape[1], folds)
+    for k in range(folds):
+        raw = best_outputs(with_wi(data, group != k), start[:, :width], steps, rate, energy)
+        with torch.no_grad():
+            out[:, group == k] = train.predicted_lobe(lambda x: raw, *train.tensors(with_wi(data, group == k))).cpu()
+    return out
+
+
+def fold_of(n_wi: int, folds: int) -> np.ndarray:
+    """Which group each of ``n_wi`` stored wi falls in: wi k in group k % folds (the stored wi are stratified by
+    elevation first, so each group spans the elevations)."""
+    return np.arange(n_wi) % folds
+
+
+def with_wi(data: dict, keep: np.ndarray) -> dict:
+    """``data`` with only the wi ``keep`` says (and their lobes)."""
+    return {**data, "wi": data["wi"][:, keep], "ms": data["ms"][:, keep]}
 
 
 def best_outputs(data: dict, start: np.ndarray, steps: int, rate: float, energy: float = 0.0,
@@ -129,6 +152,8 @@ def main(argv=None) -> int:
     ap.add_argument("--area", action="store_true",
                     help="the forward lobe (--forward implied) scaled by each layer's projected areas along wi and wo "
                          "to a power of its own (``train.area_scale``; the one-layer network's form since 2026-12-05)")
+    ap.add_argument("--folds", type=int, default=1,
+                    help="cross-validate over each configuration's wi: fit on all groups but one, score that one")
     ap.add_argument("--breakdown", action="store_true",
                     help="also split each mean lobe error by the directions it lies in (``regions``)")
     a = ap.parse_args(argv)
@@ -137,12 +162,13 @@ def main(argv=None) -> int:
         data = validation.load_shards(a.validation, n_layers)
         form = halved(data) if a.halves else data
         for label, predicted in (("network", validation.predicted_lobes(form, energy=False)),
-                                 ("bound", best_lobes(form, a.steps, a.rate, a.energy, a.forward, a.area))):
+                                 ("bound", best_lobes(form, a.steps, a.rate, a.energy, a.forward, a.area,
+                                                      a.folds))):
             scores = validation.lobe_errors(data, predicted)
             by_region = {"regions": error_by_region(data, predicted)} if a.breakdown else {}
             print(json.dumps({"layers": n_layers, "halves": a.halves, "forward": a.forward or a.area, "area": a.area,
                               "lobes": label,
-                              "steps": a.steps,
+                              "steps": a.steps, "folds": a.folds,
                               "energy_weight": a.energy,
                               **{k: v for k, v in scores.items() if k != "per_config"}, **by_region}), flush=True)
     return 0

@@ -485,6 +485,8 @@ def export(net, info: dict, data: dict, n_layers: int, out: Path, held_out: Path
     }
     if info.get("init"):
         manifest["warm_started_from"] = info["init"]
+    if info.get("distilled_from"):  # ``training.distill``: trained towards per-configuration fits
+        manifest["distilled_from"] = info["distilled_from"]
     path = Path(out) / ms.weights_path(n_layers).name
     exported = to_mlp(net, manifest)
     mlp.save(path, exported.weights, exported.biases, manifest)

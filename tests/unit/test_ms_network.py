@@ -527,6 +527,23 @@ def test_the_lobe_bound_fits_each_held_out_configuration_closer_than_the_network
         assert np.abs(fitted - alone).max() > 1e-6 * np.abs(alone).max()
 
 
+def test_the_cross_validated_bound_scores_each_wi_with_a_fit_that_never_saw_it():
+    """``lobe_bound.best_lobes(folds=3)``: the lobes at one group's wi do not change when that group's Monte Carlo
+    does (they come from the fit to the other groups), they do when another group's does, and every group spans
+    the elevations of the stratified wi."""
+    from training import lobe_bound
+
+    data = {k: v[:2] for k, v in validation.load_shards(VALIDATION, 1).items() if k != "meta"}
+    group = lobe_bound.fold_of(data["wi"].shape[1], 3)
+    assert [set(np.flatnonzero(group == k) // 3) for k in range(3)] == [{0, 1, 2}] * 3  # one wi per elevation row
+    base = lobe_bound.best_lobes(data, steps=30, rate=0.02, area=True, folds=3)
+    changed = data["ms"].copy()
+    changed[:, group == 0] *= 3.0
+    moved = lobe_bound.best_lobes({**data, "ms": changed}, steps=30, rate=0.02, area=True, folds=3)
+    np.testing.assert_array_equal(moved[:, group == 0], base[:, group == 0])
+    assert np.abs(moved[:, group != 0] - base[:, group != 0]).max() > 1e-3 * np.abs(base).max()
+
+
 def test_the_cycles_forms_area_scale_along_the_normal_is_the_references():
     """``normal_area_scale`` (vectorised over layer rows, what texture bakes use) is the reference's ``area_scale``
     at wi = wo = n, for flakes, fibers and hg layers at any orientation; ``cycles_weights`` applies it to the forward
