@@ -342,11 +342,12 @@ def train(data: dict, n_layers: int, minutes: float, seed: int = 0, batch: int =
 def optimise(net, train_idx: np.ndarray, step_loss, check_loss, minutes: float, batch: int, learning_rate: float,
              rng: np.random.Generator, log) -> dict:
     """AdamW on ``net`` for ``minutes``: epochs of shuffled mini-batches of ``train_idx`` (``step_loss(index)``),
-    the learning rate in cosine decay from ``learning_rate``, ``check_loss()`` every few seconds; ``net`` ends at
-    the state of its best check. Returns what happened (epochs, steps, the best check's step, seconds)."""
+    the learning rate in cosine decay from ``learning_rate``, ``check_loss()`` at the start and every few seconds;
+    ``net`` ends at the state of its best check. Returns what happened (epochs, steps, the best check's step, seconds)."""
     opt = torch.optim.AdamW(net.parameters(), lr=learning_rate, weight_decay=WEIGHT_DECAY)
     start, step, epoch, last_check, last_log = time.time(), 0, 0, -math.inf, -math.inf
-    best = (math.inf, None, 0)
+    with torch.no_grad():
+        best = (check_loss(), {k: v.clone() for k, v in net.state_dict().items()}, 0)  # a warm start may stay best
     budget = minutes * 60.0
     while time.time() - start < budget:
         epoch += 1
@@ -365,8 +366,7 @@ def optimise(net, train_idx: np.ndarray, step_loss, check_loss, minutes: float, 
                 last_log = time.time()
                 log(f"epoch {epoch} step {step}: train loss {step_loss_value.item():.3e}, validation loss "
                     f"{check:.3e} (best {best[0]:.3e})  ({time.time() - start:.0f} s)")
-    if best[1] is not None:
-        net.load_state_dict(best[1])
+    net.load_state_dict(best[1])
     return {"epochs": epoch, "steps": step, "best_step": best[2], "seconds": round(time.time() - start, 1)}
 
 
