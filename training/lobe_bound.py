@@ -31,14 +31,15 @@ from training import train
 
 
 def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward: bool = False,
-               area: bool = False, folds: int = 1) -> np.ndarray:
+               area: bool = False, folds: int = 1, view_linear: bool = False) -> np.ndarray:
     """f |cos wo| (C, n_wi, n_wo, 3) of the lobe form, with the forward lobe or without, with its outputs optimised
     per configuration (started from the shipped network's; the forward lobe's from ``train.FORWARD_START`` where that
     network has none); ``area`` (and so the forward lobe) adds one exponent per layer (``train.area_scale``), started
     from the shipped network's or ``train.AREA_START``. With ``folds`` > 1 the fit is cross-validated over the
     light's directions: each configuration's wi are dealt into ``folds`` groups (wi k into group k % folds), and each
     group's lobes come from the outputs fitted to the other groups' wi, so that the score says what the form reaches
-    at directions it was not fitted to (``fold_of``)."""
+    at directions it was not fitted to (``fold_of``). ``view_linear``: a richer form whose outputs follow the light's
+    direction, linear in 1 - cos θi (``lobes_at``)."""
     forward = forward or area
     rows = data["rows"]
     start = ms.network(rows.shape[1])(ms.features(rows.astype(np.float64)))
@@ -48,17 +49,30 @@ def best_lobes(data: dict, steps: int, rate: float, energy: float = 0.0, forward
     if start.shape[1] == with_forward:
         start = np.concatenate([start, np.full((len(start), rows.shape[1]), train.AREA_START)], axis=1)
     width = with_area if area else with_forward if forward else plain
-    if folds == 1:
-        raw = best_outputs(data, start[:, :width], steps, rate, energy)
-        with torch.no_grad():
-            return train.predicted_lobe(lambda x: raw, *train.tensors(data)).cpu().numpy()
+    start = start[:, :width]
+    if view_linear:
+        start = np.concatenate([start, np.zeros_like(start)], axis=1)
     out = np.zeros(data["ms"].shape)
     group = fold_of(data["wi"].shape[1], folds)
     for k in range(folds):
-        raw = best_outputs(with_wi(data, group != k), start[:, :width], steps, rate, energy)
+        fitted_to = with_wi(data, group != k) if folds > 1 else data
+        raw = best_outputs(fitted_to, start, steps, rate, energy, view_linear=view_linear)
         with torch.no_grad():
-            out[:, group == k] = train.predicted_lobe(lambda x: raw, *train.tensors(with_wi(data, group == k))).cpu()
+            out[:, group == k] = lobes_at(raw, *train.tensors(with_wi(data, group == k)), view_linear).cpu()
     return out
+
+
+def lobes_at(raw: torch.Tensor, rows: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor, view_linear: bool = False):
+    """``train.predicted_lobe`` of the outputs ``raw`` (C, width), one set per configuration; with
+    ``view_linear``, ``raw`` is (C, 2 width), a and b, and the outputs at each wi are a + b (1 - cos θi)."""
+    if not view_linear:
+        return train.predicted_lobe(lambda x: raw, rows, wi, wo)
+    n, n_wi = wi.shape[:2]
+    a, b = raw.repeat_interleave(n_wi, dim=0).chunk(2, dim=1)
+    one_wi = wi.reshape(n * n_wi, 1, 3)
+    lobes = train.predicted_lobe(lambda x: a + b * (1.0 - one_wi[:, 0, 2:]), rows.repeat_interleave(n_wi, dim=0),
+                                 one_wi, wo.repeat_interleave(n_wi, dim=0))
+    return lobes.reshape(n, n_wi, *lobes.shape[2:])
 
 
 def fold_of(n_wi: int, folds: int) -> np.ndarray:
@@ -73,11 +87,12 @@ def with_wi(data: dict, keep: np.ndarray) -> dict:
 
 
 def best_outputs(data: dict, start: np.ndarray, steps: int, rate: float, energy: float = 0.0,
-                 scaled: float = 0.0) -> torch.Tensor:
+                 scaled: float = 0.0, view_linear: bool = False) -> torch.Tensor:
     """The network outputs (C, width) that minimise each configuration's score, started from ``start``: Adam with a
     cosine decay from ``rate``, on the relative L1 error of f |cos wo| (``validation.lobe_errors``), plus ``energy``
     times the relative error of its energy and ``scaled`` times the relative L1 error of the lobes scaled to the
-    Monte Carlo's energy per wi and channel (``train.scaled_to``: the shape the energy scale renders)."""
+    Monte Carlo's energy per wi and channel (``train.scaled_to``: the shape the energy scale renders);
+    ``view_linear``: outputs that follow the light's direction (``lobes_at``)."""
     rows, wi, wo = train.tensors(data)
     truth = train.target(data)
     total = truth.sum(dim=(1, 2, 3)).clamp_min(1e-12)
@@ -86,7 +101,7 @@ def best_outputs(data: dict, start: np.ndarray, steps: int, rate: float, energy:
     for step in range(steps):
         for group in opt.param_groups:
             group["lr"] = rate * 0.5 * (1.0 + math.cos(math.pi * step / steps)) + 1e-5
-        predicted = train.predicted_lobe(lambda x: raw, rows, wi, wo)
+        predicted = lobes_at(raw, rows, wi, wo, view_linear)
         lobe = (predicted - truth).abs().sum(dim=(1, 2, 3)) / total
         gained = (predicted.sum(dim=(1, 2, 3)) - truth.sum(dim=(1, 2, 3))).abs() / total
         loss = lobe + energy * gained
@@ -154,6 +169,8 @@ def main(argv=None) -> int:
                          "to a power of its own (``train.area_scale``; the one-layer network's form since 2026-12-05)")
     ap.add_argument("--folds", type=int, default=1,
                     help="cross-validate over each configuration's wi: fit on all groups but one, score that one")
+    ap.add_argument("--view-linear", action="store_true",
+                    help="a richer form: the outputs linear in 1 - cos θi (two per output), to be cross-validated")
     ap.add_argument("--breakdown", action="store_true",
                     help="also split each mean lobe error by the directions it lies in (``regions``)")
     a = ap.parse_args(argv)
@@ -163,12 +180,12 @@ def main(argv=None) -> int:
         form = halved(data) if a.halves else data
         for label, predicted in (("network", validation.predicted_lobes(form, energy=False)),
                                  ("bound", best_lobes(form, a.steps, a.rate, a.energy, a.forward, a.area,
-                                                      a.folds))):
+                                                      a.folds, a.view_linear))):
             scores = validation.lobe_errors(data, predicted)
             by_region = {"regions": error_by_region(data, predicted)} if a.breakdown else {}
             print(json.dumps({"layers": n_layers, "halves": a.halves, "forward": a.forward or a.area, "area": a.area,
                               "lobes": label,
-                              "steps": a.steps, "folds": a.folds,
+                              "steps": a.steps, "folds": a.folds, "view_linear": a.view_linear,
                               "energy_weight": a.energy,
                               **{k: v for k, v in scores.items() if k != "per_config"}, **by_region}), flush=True)
     return 0
