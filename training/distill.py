@@ -1,12 +1,11 @@
 """Whether a lobe network can learn what per-configuration fits reach: fit, then distil.
 
-The shipped networks underfit: on configurations they trained on they score 8 to 10 points above the lobe form
-fitted to each configuration on its own (``training.lobe_bound``; docs/training.md), and neither width, steps nor
-the loss's weighting moved them. Two explanations remain: the per-configuration optima are not a smooth function of
-the layer parameters, or gradient descent through the network does not reach them (the network's weights are a
-poorly conditioned handle on outputs whose scales differ by orders of magnitude). Distillation tells them apart:
+Session 45 read the gap between the networks and the lobe form fitted to each configuration on its own
+(``training.lobe_bound``) as underfitting. If the per-configuration optima were a smooth function of the layer
+parameters, a network regressed on them would learn them, on configurations held back from it too. It does not
+(docs/training.md, session 48): the fits bend to the directions they are fitted at.
 
-    python -m training.distill fit --layers 2 --count 2048 --out <folder>      # resumable, chunk by chunk
+    python -m training.distill fit --layers 2 --count 4096 --out <folder>      # resumable, chunk by chunk
     python -m training.distill fit ... --part 1/2                               # a second process beside the first
     python -m training.distill train --layers 2 --fits <folder> --minutes 20 --out <weights folder>
     python -m training.distill score --layers 2 --fits <folder> addon/bake/weights <weights folder> ...
@@ -14,19 +13,17 @@ poorly conditioned handle on outputs whose scales differ by orders of magnitude)
 ``fit`` optimises the network outputs of ``--count`` of the split's training configurations, each on its own
 (``lobe_bound.best_outputs``, started from the shipped network's prediction), on the score alone plus ``--scaled``
 times the score of the lobes scaled to the Monte Carlo's energy (the shape the energy scale renders), and stores
-them in chunks. ``train`` regresses a network on those outputs (mean squared error of the raw outputs, warm-started
-from the shipped network), and exports it as ``training.train`` does (manifest, split and held-out scores), so that
-``training.compare`` scores it beside the shipped one. ``score`` scores the fits and the networks in the given
-weights folders on the fitted configurations, as training scores them (the prediction from above for every wo),
-alone and scaled to the Monte Carlo's energy per wi and channel.
+them in chunks. ``train`` regresses a network on them, warm-started from the shipped network (``regress``: on the
+fits' lobes, or on their raw outputs), and exports it as ``training.train`` does (manifest, split and held-out
+scores), so that ``training.compare`` scores it beside the shipped one. ``score`` scores the fits and the networks
+in the given weights folders on the fitted configurations, as training scores them (the prediction from above for
+every wo), alone and scaled to the Monte Carlo's energy per wi and channel.
 """
 from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -34,6 +31,7 @@ import numpy as np
 import torch
 
 from addon.bake import mlp, validation
+from addon.bake.exr import atomic_path
 from addon.bake import spongecake as ms
 from training import dataset, lobe_bound, train
 
@@ -67,15 +65,9 @@ def fit(data: dict, n_layers: int, count: int, folder: Path, part: tuple = (0, 1
         batch = {k: data[k][picked] for k in ("rows", "wi", "wo", "ms")}
         start = net(ms.features(batch["rows"].astype(np.float64)))
         raw = lobe_bound.best_outputs(batch, start, steps, FIT_RATE, scaled=scaled).cpu().numpy()
-        save_atomically(path, index=picked, raw=raw, start=start, steps=steps, scaled=scaled)
+        with atomic_path(path) as temporary, open(temporary, "wb") as f:
+            np.savez(f, index=picked, raw=raw, start=start, steps=steps, scaled=scaled)
         log(f"  fitted {len(picked)} configurations from {first} in {time.time() - started:.0f} s", flush=True)
-
-
-def save_atomically(path: Path, **arrays) -> None:
-    handle, temporary = tempfile.mkstemp(dir=path.parent, suffix=".npz")
-    os.close(handle)
-    np.savez(temporary, **arrays)
-    os.replace(temporary, path)
 
 
 def load_fits(folder: Path, n_layers: int) -> tuple[np.ndarray, np.ndarray]:
