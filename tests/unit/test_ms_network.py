@@ -544,14 +544,13 @@ def test_the_cross_validated_bound_scores_each_wi_with_a_fit_that_never_saw_it()
     assert np.abs(moved[:, group != 0] - base[:, group != 0]).max() > 1e-3 * np.abs(base).max()
     plain, linear = (lobe_bound.best_lobes(data, steps=0, rate=0.02, area=True, view_linear=v) for v in (False, True))
     np.testing.assert_allclose(linear, plain, rtol=1e-9, atol=1e-15)  # its slopes start at 0
-    start = torch.as_tensor(np.concatenate([np.zeros((2, train.outputs(1, True))), np.full((2, train.outputs(1, True)),
-                                                                                            0.3)], axis=1))
+    width = train.outputs(1, area=True)
+    a_and_b = torch.cat([torch.zeros(2, width), torch.full((2, width), 0.3)], dim=1).double()
     rows, wi, wo = train.tensors(data)
+    linear = lobe_bound.lobes_at(a_and_b, rows, wi, wo, view_linear=True)
     for k in (0, 4):  # the outputs at one wi are a + b (1 - cos θi)
-        at_k = lobe_bound.lobes_at(torch.full((2, train.outputs(1, True)), 0.3) * (1.0 - wi[:, k:k + 1, 2]), rows,
-                                   wi[:, k:k + 1], wo)
-        np.testing.assert_allclose(lobe_bound.lobes_at(start, rows, wi, wo, view_linear=True)[:, k:k + 1], at_k,
-                                   rtol=1e-6)
+        at_k = lobe_bound.lobes_at(torch.full((2, width), 0.3) * (1.0 - wi[:, k:k + 1, 2]), rows, wi[:, k:k + 1], wo)
+        np.testing.assert_allclose(linear[:, k:k + 1], at_k, rtol=1e-6)
 
 
 def test_the_cycles_forms_area_scale_along_the_normal_is_the_references():
