@@ -553,6 +553,33 @@ def test_the_cross_validated_bound_scores_each_wi_with_a_fit_that_never_saw_it()
         np.testing.assert_allclose(linear[:, k:k + 1], at_k, rtol=1e-6)
 
 
+def test_the_bound_fitted_to_a_fresh_walk_never_sees_the_stored_pairs(tmp_path, monkeypatch):
+    """``lobe_bound.fresh_data``: each configuration simulated anew at directions of its own (not the stored ones),
+    cached and reused; ``best_lobes(fit_to=...)``: the lobes do not move when the stored Monte Carlo does, they do
+    when the fresh one does, and ``scored`` keeps the configurations ``lobe_errors`` scores."""
+    from training import lobe_bound
+
+    data = lobe_bound.scored({k: v[:2] for k, v in validation.load_shards(VALIDATION, 2).items()})
+    assert len(data["rows"]) == 2
+    size = dataset.Size(configs=0, n_wi=4, n_wo=8, paths=200)
+    fresh = lobe_bound.fresh_data(data, size, cache=tmp_path)
+    assert fresh["ms"].shape == (2, 4, 8, 3) and np.array_equal(fresh["rows"], data["rows"])
+    assert np.abs(fresh["wi"][:, :, None] - data["wi"][:, None, :4]).sum(-1).min() > 1e-6  # directions of its own
+    assert fresh["ms"].max() > 0.0
+    monkeypatch.setattr(dataset, "simulate", lambda *a: pytest.fail("the cached walk ran again"))
+    np.testing.assert_array_equal(lobe_bound.fresh_data(data, size, cache=tmp_path)["ms"], fresh["ms"])
+    base = lobe_bound.best_lobes(data, steps=30, rate=0.02, area=True, fit_to=fresh)
+    moved = lobe_bound.best_lobes({**data, "ms": 3.0 * data["ms"]}, steps=30, rate=0.02, area=True, fit_to=fresh)
+    np.testing.assert_array_equal(moved, base)
+    refit = lobe_bound.best_lobes(data, steps=30, rate=0.02, area=True, fit_to={**fresh, "ms": 3.0 * fresh["ms"]})
+    assert np.abs(refit - base).max() > 1e-3 * np.abs(base).max()
+    other = {**data, "rows": data["rows"][::-1]}
+    with pytest.raises(ValueError, match="another stack"):
+        lobe_bound.fresh_data(other, size, cache=tmp_path)
+    with pytest.raises(ValueError, match="not both"):
+        lobe_bound.best_lobes(data, steps=1, rate=0.02, folds=3, fit_to=fresh)
+
+
 def test_the_cycles_forms_area_scale_along_the_normal_is_the_references():
     """``normal_area_scale`` (vectorised over layer rows, what texture bakes use) is the reference's ``area_scale``
     at wi = wo = n, for flakes, fibers and hg layers at any orientation; ``cycles_weights`` applies it to the forward
