@@ -254,7 +254,7 @@ def main(argv=None) -> int:
                               "steps": a.steps, "folds": a.folds, "fresh_wi": a.fresh_wi,
                               "view_linear": a.view_linear,
                               "energy_weight": a.energy,
-                              **{k: v for k, v in scores.items() if k != "per_config"}, **by_region}), flush=True)
+                              **scores, **by_region}), flush=True)
     return 0
 
 
