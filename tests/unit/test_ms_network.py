@@ -561,6 +561,8 @@ def test_the_bound_fitted_to_a_fresh_walk_never_sees_the_stored_pairs(tmp_path, 
 
     data = lobe_bound.scored({k: v[:2] for k, v in validation.load_shards(VALIDATION, 2).items()})
     assert len(data["rows"]) == 2
+    dark = {**data, "ms": data["ms"] * np.array([1.0, 0.0])[:, None, None, None]}  # no multiple scattering: unscored
+    np.testing.assert_array_equal(lobe_bound.scored(dark)["rows"], data["rows"][:1])
     size = dataset.Size(configs=0, n_wi=4, n_wo=8, paths=200)
     fresh = lobe_bound.fresh_data(data, size, cache=tmp_path)
     assert fresh["ms"].shape == (2, 4, 8, 3) and np.array_equal(fresh["rows"], data["rows"])
